@@ -1,0 +1,34 @@
+# The README's commands. Each target creates .venv on first use and installs what it needs.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+
+.PHONY: demo test bench clean
+
+demo: $(VENV)/.fast
+	$(BIN)/hamsa demo
+
+test: $(VENV)/.fast $(VENV)/.test
+	$(BIN)/python -m pytest
+
+bench: $(VENV)/.fast $(VENV)/.test
+	$(BIN)/python benchmarks/eigensolve.py
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(VENV)/.core: $(BIN)/python pyproject.toml
+	$(BIN)/pip install -q -e .
+	touch $@
+
+# CHOLMOD is optional: the script never fails, it says what it could not install.
+$(VENV)/.fast: $(VENV)/.core
+	sh tools/install-cholmod.sh $(BIN)
+	touch $@
+
+$(VENV)/.test: $(VENV)/.core
+	$(BIN)/pip install -q -e ".[test]"
+	touch $@
+
+clean:
+	rm -rf $(VENV) build src/*.egg-info .pytest_cache

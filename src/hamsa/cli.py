@@ -1,0 +1,166 @@
+"""The ``hamsa`` command-line tool.
+
+Bad input exits with code 2 and one line on stderr naming the problem (no traceback), and never
+leaves a partial output file behind (outputs are written to a temporary file, then renamed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hamsa import __version__
+from hamsa.errors import HamsaError
+
+EXIT_BAD_INPUT = 2
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hamsa",
+        description="Hamiltonian spectral shape analysis: eigenbases of -Laplacian + V on triangle meshes.",
+    )
+    parser.add_argument("--version", action="version", version=f"hamsa {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    info = commands.add_parser("info", help="describe a mesh: size, area, components, boundaries, defects")
+    info.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+
+    basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
+    basis.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    basis.add_argument("-k", type=_positive_int, required=True, help="number of eigenpairs")
+    basis.add_argument("--potential", help="potential V: .npy, or a text file with one value per vertex")
+    basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
+    basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
+    basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
+
+    demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
+    demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
+    demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
+    return parser
+
+
+def _load_potential(path: str, n: int) -> np.ndarray:
+    from hamsa.errors import PotentialError
+    from hamsa.operators import check_potential
+
+    try:
+        values = np.load(path, allow_pickle=False) if path.endswith(".npy") else np.loadtxt(path, ndmin=1)
+    except FileNotFoundError:
+        raise PotentialError(f"cannot read potential '{path}': no such file") from None
+    except (OSError, ValueError, EOFError) as exc:
+        raise PotentialError(f"cannot read potential '{path}': {exc}") from None
+    try:
+        return check_potential(values, n)
+    except PotentialError as exc:
+        raise PotentialError(f"'{path}': {exc}") from None
+
+
+def _info(args) -> None:
+    from hamsa.io import load_mesh
+
+    mesh = load_mesh(args.mesh)
+    loops = mesh.boundary_loops
+    print(f"mesh            {args.mesh}")
+    print(f"vertices        {mesh.n_vertices}")
+    print(f"faces           {mesh.n_faces}")
+    print(f"edges           {len(mesh.edges)}")
+    print(f"area            {mesh.area:.6g}")
+    print(f"bounding box    diagonal {mesh.bounding_box_diagonal:.6g}")
+    print(f"mean edge       {mesh.mean_edge_length:.6g}")
+    print(f"components      {mesh.n_components}")
+    print(f"boundary loops  {len(loops)}" + (f" (lengths {', '.join(str(len(x)) for x in loops[:8])}"
+                                            f"{', ...' if len(loops) > 8 else ''})" if loops else ""))
+    chi = mesh.euler_characteristic
+    genus = f", genus {(2 - chi) // 2}" if mesh.n_components == 1 and not loops and chi % 2 == 0 else ""
+    print(f"Euler char.     {chi}{genus}")
+    defects = []
+    if len(mesh.unreferenced_vertices):
+        defects.append(f"{len(mesh.unreferenced_vertices)} unreferenced vertices (drop with mesh.without_unreferenced())")
+    if len(mesh.non_manifold_vertices):
+        defects.append(f"{len(mesh.non_manifold_vertices)} non-manifold vertices")
+    if not mesh.is_consistently_oriented:
+        defects.append("inconsistent face orientation")
+    print(f"defects         {'; '.join(defects) if defects else 'none'}")
+
+
+def _basis(args) -> None:
+    from hamsa.eigen import eigenbasis
+    from hamsa.io import load_mesh
+
+    output = Path(args.output)
+    if output.suffix != ".npz":
+        raise HamsaError(f"output '{output}' must end in .npz")
+    if not (output.parent if str(output.parent) else Path(".")).is_dir():
+        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    start = time.perf_counter()
+    mesh = load_mesh(args.mesh)
+    loaded = time.perf_counter()
+    potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+    basis = eigenbasis(mesh, args.k, potential, mass=args.mass, backend=args.backend)
+    solved = time.perf_counter()
+    basis.save(output)
+    done = time.perf_counter()
+    kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
+    print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")
+    print(f"eigenvalues     {basis.values[0]:.6g} .. {basis.values[-1]:.6g}")
+    print(f"solver          {basis.info.method}, {basis.info.solves} solves, {basis.info.cycles} cycles, "
+          f"max relative residual {basis.info.max_residual:.1e}")
+    print(f"time            load {loaded - start:.2f} s, solve {solved - loaded:.2f} s, save {done - solved:.2f} s")
+    print(f"wrote           {output}")
+
+
+def _demo(args) -> None:
+    from hamsa.demo import step_potential_demo
+
+    result = step_potential_demo(k=args.k, height=args.height)
+    mesh = result.mesh
+    print("hamsa demo: a finite step potential on a built-in capsule (paper section 2.3, Fig. 2 in numbers)")
+    print(f"mesh: capsule, {mesh.n_vertices} vertices, {mesh.n_faces} faces, area {mesh.area:.4f}")
+    print(f"potential: V = {result.height:.4f} on the upper part (z > 0.3), 0 elsewhere "
+          f"(the V = 0 region holds {100 * result.region_fraction:.1f}% of the area)")
+    print()
+    print(result.table())
+    print()
+    print("lambda_i / phi_i: Laplace-Beltrami; E_i / psi_i: Hamiltonian. 'lower/upper': Theorem 1,")
+    print("lambda_i + min V <= E_i <= lambda_i + max V. The last columns give each eigenfunction's share of")
+    print("A-mass inside the V = 0 region: modes with E_i below the step stay trapped there; above it they leak.")
+    trapped = result.inside[result.values < result.height]
+    print(f"modes below the step: {len(trapped)}, mean mass inside {100 * trapped.mean():.1f}%; "
+          f"time {result.seconds:.2f} s")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    handlers = {"info": _info, "basis": _basis, "demo": _demo}
+    try:
+        handlers[args.command](args)
+    except HamsaError as exc:
+        print(f"hamsa {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("hamsa: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,28 @@
+"""The one small error hierarchy of hamsa.
+
+Every error a user can cause with bad input is a :class:`HamsaError` (a ``ValueError``), so a
+script can catch them all at once, and the command-line tool turns them into one line on stderr
+and exit code 2.
+"""
+
+from __future__ import annotations
+
+
+class HamsaError(ValueError):
+    """Base class of every error hamsa raises for bad input or an impossible request."""
+
+
+class MeshError(HamsaError):
+    """A mesh is malformed (bad shapes, indices, degenerate or non-manifold faces) or unreadable."""
+
+
+class PotentialError(HamsaError):
+    """A potential has the wrong length, is not finite, or does not fit the mesh."""
+
+
+class SolverError(HamsaError):
+    """An eigenproblem request is impossible (k out of range) or the solver did not converge."""
+
+
+class MissingDependencyError(HamsaError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install."""

@@ -1,0 +1,405 @@
+"""Reading and writing meshes: OFF, OBJ, PLY (ASCII and binary) and STL, optionally gzip-compressed.
+
+The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
+correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
+unindexed triangles, so identical coordinates are merged in the order they first appear.
+Every writer goes through a temporary file in the destination folder and an atomic rename, so an
+interrupted write never leaves a half-written mesh behind.
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import struct
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from hamsa.errors import MeshError
+from hamsa.mesh import TriMesh
+
+FORMATS = ("off", "obj", "ply", "stl")
+
+
+def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
+    """Return (format, gzipped) from a file name such as ``cat0.off.gz``."""
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    gzipped = bool(suffixes) and suffixes[-1] == ".gz"
+    if gzipped:
+        suffixes = suffixes[:-1]
+    fmt = suffixes[-1].lstrip(".") if suffixes else ""
+    if fmt not in FORMATS:
+        raise MeshError(f"cannot tell the mesh format of '{path}': use one of .off .obj .ply .stl (optionally .gz)")
+    return fmt, gzipped
+
+
+def load_mesh(path: str | os.PathLike) -> TriMesh:
+    """Read a triangle mesh from an OFF, OBJ, PLY or STL file (``*.gz`` is decompressed on the fly).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file; its suffix selects the format.
+
+    Returns
+    -------
+    TriMesh
+        Vertices in file order (STL: in order of first appearance), validated.
+
+    Raises
+    ------
+    MeshError
+        If the file is missing or unreadable, is not a valid file of its format, has non-triangle
+        faces, or describes an invalid mesh (see :class:`TriMesh`). The message names the file.
+    """
+    fmt, gzipped = mesh_format(path)
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read()
+        if gzipped:
+            data = gzip.decompress(data)
+    except FileNotFoundError:
+        raise MeshError(f"cannot read '{path}': no such file") from None
+    except IsADirectoryError:
+        raise MeshError(f"cannot read '{path}': it is a folder") from None
+    except (OSError, EOFError) as exc:
+        raise MeshError(f"cannot read '{path}': {exc}") from None
+    if not data.strip():
+        raise MeshError(f"cannot read '{path}': the file is empty")
+    reader = {"off": _read_off, "obj": _read_obj, "ply": _read_ply, "stl": _read_stl}[fmt]
+    try:
+        vertices, faces = reader(data)
+        return TriMesh(vertices, faces)
+    except MeshError as exc:
+        raise MeshError(f"'{path}': {exc}") from None
+    except (ValueError, IndexError, struct.error, UnicodeDecodeError) as exc:
+        raise MeshError(f"'{path}' is not a valid {fmt.upper()} file: {exc}") from None
+
+
+def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> None:
+    """Write ``mesh`` to ``path`` (format from the suffix, ``*.gz`` compressed), atomically.
+
+    OFF and OBJ are ASCII with 17 significant digits (an exact float64 round trip); PLY and STL
+    are binary little-endian (PLY stores float64 coordinates; STL is float32 by its definition).
+    """
+    fmt, gzipped = mesh_format(path)
+    writer = {"off": _write_off, "obj": _write_obj, "ply": _write_ply, "stl": _write_stl}[fmt]
+    data = writer(mesh)
+    if gzipped:
+        data = gzip.compress(data, mtime=0)
+    with atomic_write(path) as handle:
+        handle.write(data)
+
+
+@contextmanager
+def atomic_write(path: str | os.PathLike, mode: str = "wb"):
+    """Open a temporary file beside ``path``; rename it onto ``path`` only if the block succeeds."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise MeshError(f"cannot write '{path}': folder '{folder}' does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, mode) as handle:
+            yield handle
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+# ------------------------------------------------------------------------------------ text
+def _data_lines(text: str) -> list[str]:
+    lines = []
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            lines.append(line)
+    return lines
+
+
+def _fixed_width(lines: list[str], width: int, what: str) -> np.ndarray:
+    """Parse ``lines`` of whitespace-separated numbers, keeping the first ``width`` columns."""
+    tokens = [line.split() for line in lines]
+    lengths = {len(t) for t in tokens}
+    if min(lengths) < width:
+        bad = next(i for i, t in enumerate(tokens) if len(t) < width)
+        raise MeshError(f"{what} {bad} has {len(tokens[bad])} values, expected {width}")
+    if len(lengths) == 1:
+        arr = np.array(" ".join(lines).split(), dtype=np.float64).reshape(len(lines), -1)
+        return arr[:, :width]
+    return np.array([t[:width] for t in tokens], dtype=np.float64)
+
+
+def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
+    if rows.size and not np.all(rows == np.round(rows)):
+        raise MeshError(f"{what} indices must be integers")
+    return rows.astype(np.int64)
+
+
+def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    lines = _data_lines(data.decode("utf-8"))
+    if not lines:
+        raise MeshError("no OFF header")
+    header = lines[0].split()
+    if not header[0].endswith("OFF"):
+        raise MeshError(f"first line is '{lines[0][:40]}', expected 'OFF'")
+    if header[0] != "OFF" and header[0] not in ("COFF", "NOFF", "CNOFF"):
+        raise MeshError(f"unsupported OFF variant '{header[0]}'")
+    rest = header[1:]
+    body = lines[1:]
+    if not rest:
+        if not body:
+            raise MeshError("OFF header has no vertex/face counts")
+        rest, body = body[0].split(), body[1:]
+    try:
+        n, m = int(rest[0]), int(rest[1])
+    except (IndexError, ValueError):
+        raise MeshError("OFF counts line must start with '<vertices> <faces>'") from None
+    if n < 0 or m < 0:
+        raise MeshError(f"OFF header has negative counts ({n}, {m})")
+    if len(body) < n + m:
+        raise MeshError(
+            f"OFF header promises {n} vertices and {m} faces, the file has only {len(body)} data lines"
+        )
+    vertices = _fixed_width(body[:n], 3, "vertex")
+    face_lines = body[n : n + m]
+    faces = _off_faces(face_lines)
+    return vertices, faces
+
+
+def _off_faces(face_lines: list[str]) -> np.ndarray:
+    if not face_lines:
+        return np.zeros((0, 3), dtype=np.int64)
+    tokens = [line.split() for line in face_lines]
+    counts = np.array([int(t[0]) for t in tokens])
+    bad = np.flatnonzero(counts != 3)
+    if len(bad):
+        raise MeshError(f"face {bad[0]} has {counts[bad[0]]} vertices; hamsa needs a triangle mesh")
+    short = [i for i, t in enumerate(tokens) if len(t) < 4]
+    if short:
+        raise MeshError(f"face {short[0]} lists fewer than 3 vertex indices")
+    rows = np.array([t[1:4] for t in tokens], dtype=np.float64)
+    return _integer_faces(rows, "face")
+
+
+def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    vertex_lines, face_lines = [], []
+    for raw in data.decode("utf-8").splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if line.startswith("v "):
+            vertex_lines.append(line[2:])
+        elif line.startswith("f "):
+            face_lines.append(line[2:].split())
+    if not vertex_lines:
+        raise MeshError("no vertices ('v x y z' lines)")
+    vertices = _fixed_width(vertex_lines, 3, "vertex")
+    n = len(vertices)
+    lengths = {len(f) for f in face_lines}
+    if face_lines and lengths != {3}:
+        bad = next(i for i, f in enumerate(face_lines) if len(f) != 3)
+        raise MeshError(f"face {bad} has {len(face_lines[bad])} vertices; hamsa needs a triangle mesh")
+    flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
+    faces = np.asarray(flat, dtype=np.int64).reshape(-1, 3)
+    # OBJ indices are 1-based; negative indices count back from the current end of the vertex list
+    # (here: the whole list, which is exact for files that define all vertices before the faces).
+    faces = np.where(faces > 0, faces - 1, faces + n)
+    if np.any(np.asarray(flat) == 0):
+        raise MeshError("OBJ face index 0 is invalid (indices are 1-based)")
+    return vertices, faces
+
+
+# ------------------------------------------------------------------------------------- PLY
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+
+
+def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise MeshError("missing 'ply' magic or 'end_header'")
+    header = data[:end].decode("ascii").splitlines()
+    body_start = data.index(b"\n", end) + 1
+    fmt = None
+    elements: list[dict] = []
+    for line in header[1:]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        if words[0] == "format":
+            fmt = words[1]
+        elif words[0] == "element":
+            elements.append({"name": words[1], "count": int(words[2]), "props": []})
+        elif words[0] == "property":
+            if not elements:
+                raise MeshError("'property' before any 'element'")
+            if words[1] == "list":
+                elements[-1]["props"].append((words[4], "list", _ply_type(words[2]), _ply_type(words[3])))
+            else:
+                elements[-1]["props"].append((words[2], _ply_type(words[1]), None, None))
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise MeshError(f"unknown PLY format '{fmt}'")
+    names = [e["name"] for e in elements]
+    if "vertex" not in names or "face" not in names:
+        raise MeshError("PLY needs 'vertex' and 'face' elements")
+    if fmt == "ascii":
+        return _read_ply_ascii(data[body_start:].decode("ascii"), elements)
+    return _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
+
+
+def _ply_type(name: str) -> str:
+    if name not in _PLY_TYPES:
+        raise MeshError(f"unknown PLY property type '{name}'")
+    return _PLY_TYPES[name]
+
+
+def _xyz_columns(element: dict) -> list[int]:
+    names = [p[0] for p in element["props"]]
+    missing = [c for c in "xyz" if c not in names]
+    if missing:
+        raise MeshError(f"PLY vertex element lacks properties {missing}")
+    if any(p[1] == "list" for p in element["props"]):
+        raise MeshError("PLY vertex element with list properties is not supported")
+    return [names.index(c) for c in "xyz"]
+
+
+def _face_list_index(element: dict) -> int:
+    for i, p in enumerate(element["props"]):
+        if p[1] == "list" and p[0] in ("vertex_indices", "vertex_index"):
+            return i
+    raise MeshError("PLY face element lacks a 'vertex_indices' list")
+
+
+def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    lines = [line for line in text.splitlines() if line.strip()]
+    pos = 0
+    vertices = faces = None
+    for element in elements:
+        rows = lines[pos : pos + element["count"]]
+        if len(rows) < element["count"]:
+            raise MeshError(f"PLY promises {element['count']} '{element['name']}' rows, found {len(rows)}")
+        pos += element["count"]
+        if element["name"] == "vertex":
+            columns = _xyz_columns(element)
+            table = _fixed_width(rows, len(element["props"]), "vertex")
+            vertices = table[:, columns]
+        elif element["name"] == "face":
+            if _face_list_index(element) != 0:
+                raise MeshError("ASCII PLY faces must start with the vertex index list")
+            faces = _off_faces(rows)
+    return vertices, faces
+
+
+def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[np.ndarray, np.ndarray]:
+    pos = 0
+    vertices = faces = None
+    for element in elements:
+        count = element["count"]
+        if element["name"] == "face":
+            list_at = _face_list_index(element)
+            fields = []
+            for i, (name, kind, count_type, index_type) in enumerate(element["props"]):
+                if kind == "list":
+                    if i != list_at:
+                        raise MeshError("binary PLY faces with several list properties are not supported")
+                    fields += [("n", order + count_type), ("idx", order + index_type, (3,))]
+                else:
+                    fields.append((name, order + kind))
+            dtype = np.dtype(fields)
+            # Every face must be a triangle for the records to have this fixed size; the counts check it.
+            table = _frombuffer(body, dtype, count, pos, "face")
+            if np.any(table["n"] != 3):
+                raise MeshError("PLY faces must all be triangles")
+            faces = table["idx"].astype(np.int64)
+        else:
+            if any(p[1] == "list" for p in element["props"]):
+                raise MeshError(f"binary PLY element '{element['name']}' with list properties is not supported")
+            dtype = np.dtype([(p[0], order + p[1]) for p in element["props"]])
+            table = _frombuffer(body, dtype, count, pos, element["name"])
+            if element["name"] == "vertex":
+                _xyz_columns(element)
+                vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+        pos += dtype.itemsize * count
+    return vertices, faces
+
+
+def _frombuffer(body: bytes, dtype: np.dtype, count: int, pos: int, what: str) -> np.ndarray:
+    need = dtype.itemsize * count
+    if len(body) < pos + need:
+        raise MeshError(f"PLY file is truncated inside the '{what}' element")
+    return np.frombuffer(body, dtype=dtype, count=count, offset=pos)
+
+
+# ------------------------------------------------------------------------------------- STL
+def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    if len(data) >= 84:
+        count = struct.unpack("<I", data[80:84])[0]
+        if len(data) == 84 + 50 * count:
+            record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
+            corners = np.frombuffer(data, dtype=record, count=count, offset=84)["corners"]
+            return _merge_corners(corners.reshape(-1, 3).astype(np.float64))
+    text = data.decode("ascii")
+    if not text.lstrip().startswith("solid"):
+        raise MeshError("neither a binary STL (size does not match its triangle count) nor ASCII STL")
+    coords = [line.split()[1:4] for line in text.splitlines() if line.strip().startswith("vertex")]
+    if not coords or len(coords) % 3:
+        raise MeshError(f"ASCII STL has {len(coords)} 'vertex' lines, expected a multiple of 3")
+    return _merge_corners(np.array(coords, dtype=np.float64))
+
+
+def _merge_corners(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge identical corner coordinates, numbering vertices in order of first appearance."""
+    unique, first, inverse = np.unique(corners, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return unique[order], rank[inverse.ravel()].reshape(-1, 3)
+
+
+# ---------------------------------------------------------------------------------- writers
+def _format_rows(array: np.ndarray, fmt: str) -> str:
+    return "\n".join(fmt % tuple(row) for row in array.tolist())
+
+
+def _write_off(mesh: TriMesh) -> bytes:
+    head = f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n"
+    faces = np.hstack([np.full((mesh.n_faces, 1), 3), mesh.faces])
+    body = _format_rows(mesh.vertices, "%.17g %.17g %.17g") + "\n" + _format_rows(faces, "%d %d %d %d") + "\n"
+    return (head + body).encode()
+
+
+def _write_obj(mesh: TriMesh) -> bytes:
+    body = _format_rows(mesh.vertices, "v %.17g %.17g %.17g") + "\n" + _format_rows(mesh.faces + 1, "f %d %d %d") + "\n"
+    return body.encode()
+
+
+def _write_ply(mesh: TriMesh) -> bytes:
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment written by hamsa\n"
+        f"element vertex {mesh.n_vertices}\nproperty double x\nproperty double y\nproperty double z\n"
+        f"element face {mesh.n_faces}\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    record = np.dtype([("n", "u1"), ("idx", "<i4", (3,))])
+    faces = np.empty(mesh.n_faces, dtype=record)
+    faces["n"] = 3
+    faces["idx"] = mesh.faces
+    return header.encode() + mesh.vertices.astype("<f8").tobytes() + faces.tobytes()
+
+
+def _write_stl(mesh: TriMesh) -> bytes:
+    record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
+    table = np.zeros(mesh.n_faces, dtype=record)
+    v = mesh.vertices[mesh.faces]
+    normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    table["normal"] = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    table["corners"] = v
+    header = b"binary STL written by hamsa".ljust(80, b" ")
+    return header + struct.pack("<I", mesh.n_faces) + table.tobytes()

@@ -1,0 +1,381 @@
+"""Triangle meshes: the validated :class:`TriMesh` value object and its connectivity queries.
+
+A ``TriMesh`` holds ``vertices`` (n, 3) float64 and ``faces`` (m, 3) int64, both read-only.
+Construction validates them and raises :class:`~hamsa.errors.MeshError` naming the first problem:
+non-finite coordinates, out-of-range or negative indices, faces with a repeated vertex,
+zero-area faces, edges shared by more than two faces, duplicate faces, empty meshes.
+Vertex order is never changed: ground-truth correspondences are vertex indices.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from hamsa.errors import MeshError
+
+# A face is "zero-area" when its area is below this fraction of its longest edge squared, i.e. its
+# smallest angle is below ~2e-12 rad: degenerate up to floating-point noise.
+_DEGENERATE_AREA_RATIO = 1e-12
+
+
+def _first(indices: np.ndarray, limit: int = 5) -> str:
+    shown = ", ".join(str(int(i)) for i in indices[:limit])
+    return shown + (", ..." if len(indices) > limit else "")
+
+
+class TriMesh:
+    """A validated triangle mesh.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (n, 3)
+        Vertex coordinates; converted to float64.
+    faces : array_like, shape (m, 3)
+        Vertex indices of each triangle (0-based, integer dtype); converted to int64.
+
+    Raises
+    ------
+    MeshError
+        If the arrays have the wrong shape or dtype, or the mesh is empty, has non-finite
+        coordinates, out-of-range indices, faces with a repeated vertex, zero-area faces,
+        duplicate faces or non-manifold edges (shared by more than two faces).
+
+    Notes
+    -----
+    Unreferenced vertices are allowed (TOSCA's gorilla has 1328), but operators refuse them
+    because their mass is zero; :meth:`without_unreferenced` removes them and returns the index map.
+    Both arrays are read-only; derived quantities are computed once and cached.
+
+    Examples
+    --------
+    >>> import hamsa
+    >>> mesh = hamsa.TriMesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> mesh.n_vertices, mesh.n_faces, float(mesh.area)
+    (3, 1, 0.5)
+    """
+
+    def __init__(self, vertices, faces):
+        vertices = _as_vertices(vertices)
+        faces = _as_faces(faces)
+        _validate(vertices, faces)
+        vertices.flags.writeable = False
+        faces.flags.writeable = False
+        self._vertices = vertices
+        self._faces = faces
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float64 vertex coordinates (read-only)."""
+        return self._vertices
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(m, 3) int64 vertex indices of the triangles (read-only)."""
+        return self._faces
+
+    @property
+    def n_vertices(self) -> int:
+        return self._vertices.shape[0]
+
+    @property
+    def n_faces(self) -> int:
+        return self._faces.shape[0]
+
+    def __repr__(self) -> str:
+        return f"TriMesh(n_vertices={self.n_vertices}, n_faces={self.n_faces})"
+
+    # ----------------------------------------------------------------------------- geometry
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """(m,) area of each triangle."""
+        return _face_areas(self._vertices, self._faces)
+
+    @cached_property
+    def area(self) -> float:
+        """Total surface area (sum of the triangle areas)."""
+        return float(self.face_areas.sum())
+
+    @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """(e,) length of each unique edge, in the order of :attr:`edges`."""
+        v = self._vertices
+        return np.linalg.norm(v[self.edges[:, 1]] - v[self.edges[:, 0]], axis=1)
+
+    @cached_property
+    def mean_edge_length(self) -> float:
+        return float(self.edge_lengths.mean())
+
+    @cached_property
+    def bounding_box_diagonal(self) -> float:
+        used = self._vertices[self.referenced]
+        return float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+
+    # ------------------------------------------------------------------------- connectivity
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(e, 2) unique undirected edges, each as (smaller index, larger index), sorted."""
+        return self._edge_table[0]
+
+    @cached_property
+    def edge_face_counts(self) -> np.ndarray:
+        """(e,) number of faces incident to each edge of :attr:`edges` (1 = boundary, 2 = interior)."""
+        return self._edge_table[1]
+
+    @cached_property
+    def _edge_table(self) -> tuple[np.ndarray, np.ndarray]:
+        return _unique_edges(self._faces)
+
+    @cached_property
+    def referenced(self) -> np.ndarray:
+        """(n,) bool, True for vertices used by at least one face."""
+        mask = np.zeros(self.n_vertices, dtype=bool)
+        mask[self._faces.ravel()] = True
+        return mask
+
+    @cached_property
+    def unreferenced_vertices(self) -> np.ndarray:
+        """Indices of vertices that no face uses."""
+        return np.flatnonzero(~self.referenced)
+
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        """(b, 2) edges incident to exactly one face."""
+        return self.edges[self.edge_face_counts == 1]
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Closed boundary curves, each an array of vertex indices in order along the loop.
+
+        A boundary vertex touched by several loops (a "pinched" boundary) is followed greedily;
+        loops are returned in order of their smallest vertex index.
+        """
+        return _boundary_loops(self.boundary_edges)
+
+    @cached_property
+    def vertex_components(self) -> tuple[int, np.ndarray]:
+        """(count, labels): connected components of the referenced vertices.
+
+        ``labels`` has shape (n,); unreferenced vertices get the label -1 and are not counted.
+        """
+        n = self.n_vertices
+        e = self.edges
+        graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        _, labels = connected_components(graph, directed=False)
+        labels = labels.astype(np.int64)
+        labels[~self.referenced] = -1
+        used = np.unique(labels[labels >= 0])
+        relabel = np.full(labels.max() + 2, -1, dtype=np.int64)
+        relabel[used] = np.arange(len(used))
+        return len(used), relabel[labels]
+
+    @property
+    def n_components(self) -> int:
+        return self.vertex_components[0]
+
+    @cached_property
+    def euler_characteristic(self) -> int:
+        """V - E + F over the referenced vertices."""
+        return int(self.referenced.sum()) - len(self.edges) + self.n_faces
+
+    @property
+    def is_closed(self) -> bool:
+        """True when every edge has two incident faces (no boundary)."""
+        return bool(np.all(self.edge_face_counts == 2))
+
+    @cached_property
+    def is_consistently_oriented(self) -> bool:
+        """True when every interior edge is traversed in opposite directions by its two faces."""
+        f = self._faces
+        directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        codes = directed[:, 0] * self.n_vertices + directed[:, 1]
+        return len(np.unique(codes)) == len(codes)
+
+    @cached_property
+    def non_manifold_vertices(self) -> np.ndarray:
+        """Vertices whose incident faces do not form a single fan (e.g. two cones touching at a tip)."""
+        return _non_manifold_vertices(self._faces, self.n_vertices)
+
+    def without_unreferenced(self) -> tuple[TriMesh, np.ndarray]:
+        """Remove unreferenced vertices, keeping the order of the others.
+
+        Returns
+        -------
+        mesh : TriMesh
+            The mesh on the referenced vertices only.
+        kept : (n_kept,) int64
+            ``kept[i]`` is the index in this mesh of vertex ``i`` of the new mesh; use it to carry
+            per-vertex data and correspondences (``field_new = field_old[kept]``).
+        """
+        kept = np.flatnonzero(self.referenced)
+        if len(kept) == self.n_vertices:
+            return self, kept
+        new_index = np.full(self.n_vertices, -1, dtype=np.int64)
+        new_index[kept] = np.arange(len(kept))
+        return TriMesh(self._vertices[kept], new_index[self._faces]), kept
+
+    def require_operator_ready(self) -> None:
+        """Raise MeshError if the mesh has vertices without area (operators would be singular)."""
+        if len(self.unreferenced_vertices):
+            raise MeshError(
+                f"mesh has {len(self.unreferenced_vertices)} unreferenced vertices "
+                f"({_first(self.unreferenced_vertices)}); they carry no area and make the mass "
+                "matrix singular: use mesh.without_unreferenced() and keep its index map"
+            )
+
+
+def as_trimesh(mesh_like) -> TriMesh:
+    """Accept a :class:`TriMesh` or a ``(vertices, faces)`` pair and return a TriMesh."""
+    if isinstance(mesh_like, TriMesh):
+        return mesh_like
+    if isinstance(mesh_like, (tuple, list)) and len(mesh_like) == 2:
+        return TriMesh(*mesh_like)
+    raise MeshError(f"expected a TriMesh or a (vertices, faces) pair, got {type(mesh_like).__name__}")
+
+
+# ----------------------------------------------------------------------------------- helpers
+def _as_vertices(vertices) -> np.ndarray:
+    try:
+        v = np.array(vertices, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(f"vertices are not a numeric (n, 3) array: {exc}") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise MeshError(f"vertices must have shape (n, 3), got {v.shape}")
+    return v
+
+
+def _as_faces(faces) -> np.ndarray:
+    f = np.asarray(faces)
+    if f.size == 0:
+        f = f.reshape(0, 3) if f.ndim < 2 else f
+    if f.ndim != 2 or f.shape[1] != 3:
+        if f.ndim == 2 and f.shape[1] > 3:
+            raise MeshError(f"faces have {f.shape[1]} vertices each; hamsa needs triangles (m, 3)")
+        raise MeshError(f"faces must have shape (m, 3), got {f.shape}")
+    if f.size and not np.issubdtype(f.dtype, np.integer):
+        raise MeshError(f"face indices must be integers, got dtype {f.dtype}")
+    return np.array(f, dtype=np.int64)
+
+
+def _face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    v0, v1, v2 = (vertices[faces[:, c]] for c in range(3))
+    return 0.5 * np.linalg.norm(np.cross(v1 - v0, v2 - v0), axis=1)
+
+
+def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    half = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    half.sort(axis=1)
+    edges, counts = np.unique(half, axis=0, return_counts=True)
+    return edges, counts
+
+
+def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
+    n, m = len(vertices), len(faces)
+    if n == 0 or m == 0:
+        raise MeshError(f"mesh is empty ({n} vertices, {m} faces)")
+    bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
+    if len(bad):
+        raise MeshError(f"{len(bad)} vertices have non-finite coordinates (NaN or Inf): {_first(bad)}")
+    big = np.abs(vertices).max()
+    if big > 1e150:
+        raise MeshError(f"coordinates as large as {big:.3g} overflow area computations; rescale the mesh")
+    low, high = faces.min(axis=1), faces.max(axis=1)
+    bad = np.flatnonzero(low < 0)
+    if len(bad):
+        raise MeshError(f"face {bad[0]} has a negative vertex index {faces[bad[0]].tolist()}")
+    bad = np.flatnonzero(high >= n)
+    if len(bad):
+        raise MeshError(
+            f"face {bad[0]} references vertex {int(high[bad[0]])}, mesh has {n} vertices"
+        )
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    bad = np.flatnonzero(repeated)
+    if len(bad):
+        raise MeshError(
+            f"{len(bad)} faces repeat a vertex (first: face {bad[0]} = {faces[bad[0]].tolist()})"
+        )
+    areas = _face_areas(vertices, faces)
+    v = vertices
+    longest = np.max(
+        [np.sum((v[faces[:, a]] - v[faces[:, b]]) ** 2, axis=1) for a, b in ((0, 1), (1, 2), (2, 0))],
+        axis=0,
+    )
+    bad = np.flatnonzero(areas <= _DEGENERATE_AREA_RATIO * longest)
+    if len(bad):
+        raise MeshError(
+            f"{len(bad)} faces have zero area (collinear vertices), first: face {bad[0]} = "
+            f"{faces[bad[0]].tolist()}: {_first(bad)}"
+        )
+    sorted_faces = np.sort(faces, axis=1)
+    _, first_index, counts = np.unique(sorted_faces, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        dup = np.sort(first_index[counts > 1])
+        raise MeshError(f"{int((counts - 1).sum())} duplicate faces (same three vertices), first: face {dup[0]}")
+    edges, counts = _unique_edges(faces)
+    bad = np.flatnonzero(counts > 2)
+    if len(bad):
+        e = edges[bad[0]]
+        raise MeshError(
+            f"{len(bad)} non-manifold edges (shared by more than two faces), first: edge "
+            f"({e[0]}, {e[1]}) is shared by {counts[bad[0]]} faces"
+        )
+
+
+def _boundary_loops(boundary_edges: np.ndarray) -> list[np.ndarray]:
+    if len(boundary_edges) == 0:
+        return []
+    neighbours: dict[int, list[int]] = {}
+    for a, b in boundary_edges.tolist():
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    unused = {tuple(e) for e in boundary_edges.tolist()}
+    loops = []
+    for start in sorted(neighbours):
+        while any((min(start, x), max(start, x)) in unused for x in neighbours[start]):
+            loop = [start]
+            current = start
+            while True:
+                nxt = next(
+                    (x for x in neighbours[current] if (min(current, x), max(current, x)) in unused), None
+                )
+                if nxt is None:
+                    break
+                unused.discard((min(current, nxt), max(current, nxt)))
+                if nxt == start:
+                    break
+                loop.append(nxt)
+                current = nxt
+            loops.append(np.asarray(loop, dtype=np.int64))
+    return loops
+
+
+def _non_manifold_vertices(faces: np.ndarray, n: int) -> np.ndarray:
+    """Vertices whose incident faces split into several edge-connected fans."""
+    m = len(faces)
+    # Corner c of face f is the pair (vertex faces[f, c], face f); two corners at the same vertex are
+    # linked when their faces share an edge through that vertex.
+    corner_vertex = faces.ravel()
+    corner_id = np.arange(3 * m)
+    links = []
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        # the directed-free edge (faces[:,a], faces[:,b]) touches corners a and b of each face
+        key = np.sort(faces[:, [a, b]], axis=1)
+        for c in (a, b):
+            links.append((key[:, 0], key[:, 1], faces[:, c], 3 * np.arange(m) + c))
+    # group corners by (edge, vertex): the corners of different faces sharing the edge at that vertex
+    e0 = np.concatenate([x[0] for x in links])
+    e1 = np.concatenate([x[1] for x in links])
+    vert = np.concatenate([x[2] for x in links])
+    corner = np.concatenate([x[3] for x in links])
+    order = np.lexsort((vert, e1, e0))
+    e0, e1, vert, corner = e0[order], e1[order], vert[order], corner[order]
+    same = (e0[1:] == e0[:-1]) & (e1[1:] == e1[:-1]) & (vert[1:] == vert[:-1])
+    rows, cols = corner[:-1][same], corner[1:][same]
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+    _, fan = connected_components(graph, directed=False)
+    fans_per_vertex = np.unique(np.stack([corner_vertex, fan[corner_id]], axis=1), axis=0)[:, 0]
+    counts = np.bincount(fans_per_vertex, minlength=n)
+    return np.flatnonzero(counts > 1)

@@ -1,0 +1,214 @@
+"""Linear finite-element operators on a triangle mesh: stiffness W, mass A and the Hamiltonian H.
+
+Conventions (stated once, used everywhere in hamsa):
+
+* ``W`` is the cotangent stiffness matrix, **positive semidefinite**: ``W_ij = -(cot a_ij + cot b_ij)/2``
+  on edges, ``W_ii = -sum_j W_ij``, so ``W @ 1 = 0`` and ``f @ W @ f = integral |grad f|^2 >= 0``.
+  The paper's eq. (cotan) prints the opposite sign (a negative semidefinite W), which contradicts
+  H = W + A V, E >= 0 and Theorem 1; we use the PSD sign (shared/paper/NOTES.md section 1.1).
+* ``A`` is the mass matrix: by default the lumped mixed-Voronoi areas of Meyer et al. 2003
+  (eq. fem6 of the paper), whose sum is exactly the surface area.
+* Boundary edges have a single cotangent term: natural (Neumann) boundary conditions.
+* The Hamiltonian ``H = W + A diag(V)`` (eq. fem6): a generalized eigenproblem ``H psi = E A psi``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from hamsa.errors import PotentialError
+from hamsa.mesh import TriMesh, as_trimesh
+
+MASS_KINDS = ("voronoi", "barycentric", "full")
+
+
+def _corner_geometry(mesh: TriMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-face cotangents of the three corner angles, squared opposite edge lengths, and areas.
+
+    Corner c of face (i0, i1, i2) is vertex i_c; its opposite edge is e_c = v[i_{c+2}] - v[i_{c+1}].
+    cot(angle at c) = -(e_{c+1} . e_{c+2}) / (2 area).
+    """
+    v = mesh.vertices
+    f = mesh.faces
+    p = [v[f[:, c]] for c in range(3)]
+    e = [p[(c + 2) % 3] - p[(c + 1) % 3] for c in range(3)]
+    double_area = np.linalg.norm(np.cross(e[0], e[1]), axis=1)
+    cot = np.stack([-np.einsum("ij,ij->i", e[(c + 1) % 3], e[(c + 2) % 3]) for c in range(3)], axis=1)
+    cot /= double_area[:, None]
+    sq_len = np.stack([np.einsum("ij,ij->i", e[c], e[c]) for c in range(3)], axis=1)
+    return cot, sq_len, 0.5 * double_area
+
+
+def stiffness_matrix(mesh) -> sp.csr_matrix:
+    """Cotangent stiffness matrix W, symmetric positive semidefinite (Pinkall-Polthier 1993).
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (n, n), float64
+        ``W_ij = -(cot alpha_ij + cot beta_ij)/2`` for each edge (one term on boundary edges),
+        ``W_ii = -sum_{j != i} W_ij``; ``W @ ones = 0``. Units: dimensionless (cotangents), so
+        ``f @ W @ f`` is the Dirichlet energy integral of |grad f|^2 over the surface.
+        This is the negation of the paper's eq. (cotan), whose sign is a misprint (NOTES.md 1.1),
+        and equals ``-igl.cotmatrix(V, F)``.
+    """
+    mesh = as_trimesh(mesh)
+    cot, _, _ = _corner_geometry(mesh)
+    f = mesh.faces
+    n = mesh.n_vertices
+    # corner c contributes 0.5 cot_c to its opposite edge (i_{c+1}, i_{c+2})
+    i = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    j = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
+    w = 0.5 * np.concatenate([cot[:, 0], cot[:, 1], cot[:, 2]])
+    off = sp.coo_matrix((-w, (i, j)), shape=(n, n))
+    off = (off + off.T).tocsr()
+    diagonal = -np.asarray(off.sum(axis=1)).ravel()
+    stiffness = (off + sp.diags(diagonal)).tocsr()
+    stiffness.sum_duplicates()
+    stiffness.sort_indices()
+    return stiffness
+
+
+def vertex_areas(mesh, kind: str = "voronoi") -> np.ndarray:
+    """Lumped area of each vertex, shape (n,); ``sum(vertex_areas(mesh)) == mesh.area``.
+
+    ``kind="voronoi"``: mixed Voronoi cells (Meyer, Desbrun, Schroeder, Barr 2003). In a
+    non-obtuse triangle PQR, P gets ``(|PR|^2 cot Q + |PQ|^2 cot R) / 8``; in an obtuse triangle the
+    obtuse vertex gets area/2 and the two others area/4 each.
+    ``kind="barycentric"``: each vertex gets a third of the area of each incident triangle.
+    """
+    mesh = as_trimesh(mesh)
+    mesh.require_operator_ready()
+    cot, sq_len, area = _corner_geometry(mesh)
+    if kind == "barycentric":
+        corner_area = np.repeat(area[:, None] / 3.0, 3, axis=1)
+    elif kind == "voronoi":
+        voronoi = np.stack(
+            [(sq_len[:, (c + 1) % 3] * cot[:, (c + 1) % 3] + sq_len[:, (c + 2) % 3] * cot[:, (c + 2) % 3]) / 8.0
+             for c in range(3)],
+            axis=1,
+        )
+        obtuse_corner = cot < 0
+        obtuse_face = obtuse_corner.any(axis=1)
+        corner_area = np.where(
+            obtuse_face[:, None],
+            np.where(obtuse_corner, area[:, None] / 2.0, area[:, None] / 4.0),
+            voronoi,
+        )
+    else:
+        raise ValueError(f"lumped mass kind must be 'voronoi' or 'barycentric', got {kind!r}")
+    return np.bincount(mesh.faces.ravel(), weights=corner_area.ravel(), minlength=mesh.n_vertices)
+
+
+def mass_matrix(mesh, kind: str = "voronoi") -> sp.csr_matrix:
+    """Mass matrix A, shape (n, n), symmetric positive definite, units of area.
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+    kind : {"voronoi", "barycentric", "full"}
+        ``"voronoi"`` (default, the paper's choice): diagonal mixed-Voronoi areas, see
+        :func:`vertex_areas`. ``"barycentric"``: diagonal, a third of each incident triangle.
+        ``"full"``: the consistent P1 mass ``M_ij = integral phi_i phi_j`` (area/6 on the diagonal and
+        area/12 off it, per triangle); not diagonal.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+        For every kind, ``ones @ A @ ones`` equals the surface area.
+    """
+    if kind not in MASS_KINDS:
+        raise ValueError(f"mass kind must be one of {MASS_KINDS}, got {kind!r}")
+    mesh = as_trimesh(mesh)
+    if kind == "full":
+        return potential_mass_matrix(mesh, np.ones(mesh.n_vertices), kind="full")
+    return sp.diags(vertex_areas(mesh, kind)).tocsr()
+
+
+def potential_mass_matrix(mesh, potential: np.ndarray, kind: str = "voronoi") -> sp.csr_matrix:
+    """The discrete potential term ``integral V phi_i phi_j``, shape (n, n).
+
+    For the lumped kinds it is ``A diag(V)`` (the paper's eq. fem6), diagonal. For ``kind="full"``
+    it is the exact integral with V linearly interpolated: per triangle of area |T|,
+    ``|T| (V_i/10 + (V_j + V_k)/30)`` on the diagonal and ``|T| (V_i/30 + V_j/30 + V_k/60)`` off it;
+    it is symmetric and has the sparsity of W. With V = 1 both reduce to the mass matrix.
+    """
+    mesh = as_trimesh(mesh)
+    potential = check_potential(potential, mesh.n_vertices)
+    if kind != "full":
+        return sp.diags(vertex_areas(mesh, kind) * potential).tocsr()
+    mesh.require_operator_ready()
+    f = mesh.faces
+    area = mesh.face_areas
+    vf = potential[f]
+    total = vf.sum(axis=1)
+    n = mesh.n_vertices
+    rows, cols = [f[:, c] for c in range(3)], [f[:, c] for c in range(3)]
+    vals = [area * (vf[:, c] / 10.0 + (total - vf[:, c]) / 30.0) for c in range(3)]
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        entry = area * ((vf[:, a] + vf[:, b]) / 30.0 + vf[:, c] / 60.0)
+        rows += [f[:, a], f[:, b]]
+        cols += [f[:, b], f[:, a]]
+        vals += [entry, entry]
+    matrix = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    matrix = matrix.tocsr()
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    return matrix
+
+
+def check_potential(potential, n: int) -> np.ndarray:
+    """Return ``potential`` as a finite float64 array of length n, or raise PotentialError."""
+    try:
+        v = np.asarray(potential, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise PotentialError(f"potential is not numeric: {exc}") from None
+    if v.ndim == 2 and 1 in v.shape:
+        v = v.ravel()
+    if v.shape != (n,):
+        raise PotentialError(f"potential has shape {v.shape}, the mesh has {n} vertices: expected ({n},)")
+    bad = np.flatnonzero(~np.isfinite(v))
+    if len(bad):
+        raise PotentialError(f"potential has {len(bad)} non-finite values (NaN or Inf), first at vertex {bad[0]}")
+    return v
+
+
+def hamiltonian(mesh, potential=None, mass: str = "voronoi") -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """The discrete Hamiltonian ``H = W + A diag(V)`` and the mass ``A`` (paper eq. fem6).
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+    potential : array_like, shape (n,), optional
+        V at each vertex, any sign, in units of 1/length^2 (the units of the eigenvalues).
+        None means V = 0 (the Laplace-Beltrami operator).
+    mass : {"voronoi", "barycentric", "full"}
+        Mass kind, see :func:`mass_matrix`; with "full" the potential term is the consistent
+        ``integral V phi_i phi_j`` (see :func:`potential_mass_matrix`).
+
+    Returns
+    -------
+    H : scipy.sparse.csr_matrix, shape (n, n)
+        Symmetric, with the sparsity pattern of W (the potential only changes the diagonal for the
+        lumped kinds). Generalized eigenproblem: ``H psi = E A psi``.
+    A : scipy.sparse.csr_matrix, shape (n, n)
+    """
+    mesh = as_trimesh(mesh)
+    if mass not in MASS_KINDS:
+        raise ValueError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
+    mesh.require_operator_ready()
+    stiffness = stiffness_matrix(mesh)
+    mass_mat = mass_matrix(mesh, mass)
+    if potential is None:
+        return stiffness, mass_mat
+    potential = check_potential(potential, mesh.n_vertices)
+    if mass == "full":
+        term = potential_mass_matrix(mesh, potential, "full")
+    else:
+        term = sp.diags(mass_mat.diagonal() * potential)
+    return (stiffness + term).tocsr(), mass_mat

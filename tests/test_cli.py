@@ -1,0 +1,79 @@
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import hamsa
+from hamsa import shapes
+from hamsa.cli import main
+
+
+def run(*args):
+    """The CLI as a user runs it: a separate process, capturing both streams."""
+    return subprocess.run([sys.executable, "-m", "hamsa.cli", *args], capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture
+def mesh_file(tmp_path):
+    path = tmp_path / "capsule.off"
+    hamsa.save_mesh(shapes.capsule(n_around=24), path)
+    return path
+
+
+def test_info_describes_the_mesh(mesh_file, capsys):
+    assert main(["info", str(mesh_file)]) == 0
+    out = capsys.readouterr().out
+    assert "components      1" in out and "Euler char.     2, genus 0" in out and "defects         none" in out
+
+
+def test_basis_writes_a_loadable_npz(mesh_file, tmp_path, capsys):
+    mesh = hamsa.load_mesh(mesh_file)
+    potential = tmp_path / "v.npy"
+    np.save(potential, np.linspace(0, 3, mesh.n_vertices))
+    out = tmp_path / "basis.npz"
+    assert main(["basis", str(mesh_file), "-k", "6", "--potential", str(potential), "-o", str(out)]) == 0
+    assert "time" in capsys.readouterr().out
+    basis = hamsa.Eigenbasis.load(out)
+    reference = hamsa.eigenbasis(mesh, 6, np.linspace(0, 3, mesh.n_vertices))
+    np.testing.assert_allclose(basis.values, reference.values, rtol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("missing mesh", "no such file"),
+        ("garbage mesh", "expected 'OFF'"),
+        ("short potential", "potential has shape"),
+        ("nan potential", "non-finite"),
+        ("k too large", "between 1 and the number of vertices"),
+        ("bad output", "must end in .npz"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line_and_no_output(tmp_path, mesh_file, case, message):
+    out = tmp_path / "out.npz"
+    n = hamsa.load_mesh(mesh_file).n_vertices
+    np.save(tmp_path / "short.npy", np.zeros(n - 1))
+    np.save(tmp_path / "nan.npy", np.full(n, np.nan))
+    (tmp_path / "garbage.off").write_bytes(b"\x00garbage")
+    args = {
+        "missing mesh": ["basis", str(tmp_path / "nope.off"), "-k", "3", "-o", str(out)],
+        "garbage mesh": ["info", str(tmp_path / "garbage.off")],
+        "short potential": ["basis", str(mesh_file), "-k", "3", "--potential", str(tmp_path / "short.npy"), "-o", str(out)],
+        "nan potential": ["basis", str(mesh_file), "-k", "3", "--potential", str(tmp_path / "nan.npy"), "-o", str(out)],
+        "k too large": ["basis", str(mesh_file), "-k", "100000", "-o", str(out)],
+        "bad output": ["basis", str(mesh_file), "-k", "3", "-o", str(tmp_path / "out.txt")],
+    }[case]
+    result = run(*args)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in result.stderr
+    assert not out.exists() and not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+
+
+def test_demo_prints_the_theorem_1_table(capsys):
+    assert main(["demo", "-k", "8"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.strip()[:1].isdigit() and ("ok" in line or "FAIL" in line)]
+    assert len(rows) == 8 and all(" ok " in row for row in rows)

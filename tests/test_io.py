@@ -1,0 +1,116 @@
+import gzip
+import os
+
+import numpy as np
+import pytest
+
+import hamsa
+from hamsa import MeshError, shapes
+from conftest import DATA
+
+
+@pytest.fixture
+def mesh():
+    # a shuffled vertex order: the loaders must keep it exactly
+    base = shapes.icosphere(2)
+    order = np.random.default_rng(3).permutation(base.n_vertices)
+    inverse = np.argsort(order)
+    return hamsa.TriMesh(base.vertices[order], inverse[base.faces])
+
+
+@pytest.mark.parametrize("suffix", [".off", ".obj", ".ply", ".off.gz", ".obj.gz", ".ply.gz"])
+def test_round_trip_keeps_vertex_order_and_values(tmp_path, mesh, suffix):
+    path = tmp_path / f"m{suffix}"
+    hamsa.save_mesh(mesh, path)
+    back = hamsa.load_mesh(path)
+    np.testing.assert_array_equal(back.vertices, mesh.vertices)
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+
+
+def test_stl_round_trip_merges_corners_in_first_appearance_order(tmp_path, mesh):
+    path = tmp_path / "m.stl"
+    hamsa.save_mesh(mesh, path)
+    back = hamsa.load_mesh(path)
+    assert back.n_vertices == mesh.n_vertices and back.n_faces == mesh.n_faces
+    # same triangles (float32 coordinates), vertices numbered by first appearance
+    np.testing.assert_allclose(back.vertices[back.faces], mesh.vertices[mesh.faces], atol=1e-6)
+
+
+def test_ascii_stl_and_ascii_ply_and_obj_variants(tmp_path):
+    (tmp_path / "a.stl").write_text(
+        "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n"
+        "facet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n"
+    )
+    stl = hamsa.load_mesh(tmp_path / "a.stl")
+    assert stl.n_vertices == 4 and stl.faces.tolist() == [[0, 1, 2], [1, 3, 2]]
+    (tmp_path / "a.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "property uchar red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0 255\n1 0 0 255\n0 1 0 255\n3 0 1 2\n"
+    )
+    assert hamsa.load_mesh(tmp_path / "a.ply").faces.tolist() == [[0, 1, 2]]
+    (tmp_path / "a.obj").write_text("# c\nv 0 0 0\nv 1 0 0\nvn 0 0 1\nv 0 1 0\nf 1//1 2//1 -1//1\n")
+    assert hamsa.load_mesh(tmp_path / "a.obj").faces.tolist() == [[0, 1, 2]]
+    (tmp_path / "b.off").write_text("OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 255 0 0\n")
+    assert hamsa.load_mesh(tmp_path / "b.off").n_faces == 1
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("empty.off", b"", "empty"),
+        ("garbage.off", b"\x00\x01\x02garbage", "OFF"),
+        ("counts.off", b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "promises 4 vertices"),
+        ("quad.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n", "triangle mesh"),
+        ("nan.off", b"OFF\n3 1 0\n0 0 nan\n1 0 0\n0 1 0\n3 0 1 2\n", "non-finite"),
+        ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "references vertex 8"),
+        ("trunc.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\n"
+         b"property double y\nproperty double z\nelement face 1\nproperty list uchar int vertex_indices\n"
+         b"end_header\n\x00\x00", "truncated"),
+        ("garbage.stl", b"\x07" * 30, "STL"),
+        ("bad.off.gz", b"not gzip at all", "cannot read"),
+        ("mesh.xyz", b"1 2 3", "cannot tell the mesh format"),
+    ],
+)
+def test_bad_files_raise_mesh_error_naming_the_file(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(MeshError, match=message) as info:
+        hamsa.load_mesh(path)
+    if not name.endswith(".xyz"):
+        assert name in str(info.value)
+
+
+def test_missing_file_and_missing_folder(tmp_path, mesh):
+    with pytest.raises(MeshError, match="no such file"):
+        hamsa.load_mesh(tmp_path / "nope.off")
+    with pytest.raises(MeshError, match="does not exist"):
+        hamsa.save_mesh(mesh, tmp_path / "no" / "dir.off")
+
+
+def test_failed_write_leaves_no_file(tmp_path, mesh, monkeypatch):
+    import hamsa.io as hio
+
+    def boom(_mesh):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setitem(hio.__dict__, "_write_off", boom)
+    with pytest.raises(RuntimeError):
+        hamsa.save_mesh(mesh, tmp_path / "x.off")
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.data
+def test_reads_the_gzipped_datasets_in_file_order():
+    path = DATA / "tosca_hires" / "meshes" / "cat0.off.gz"
+    mesh = hamsa.load_mesh(path)
+    assert (mesh.n_vertices, mesh.n_faces) == (27894, 55712)
+    with gzip.open(path, "rt") as handle:
+        lines = [line for line in handle.read().splitlines() if line.strip()]
+    first = np.array(lines[2].split(), float)  # after "OFF" and the counts line
+    np.testing.assert_array_equal(mesh.vertices[0], first)
+    gorilla = hamsa.load_mesh(DATA / "tosca_hires" / "meshes" / "gorilla1.off.gz")
+    assert len(gorilla.unreferenced_vertices) == 1328
+    hand = hamsa.load_mesh(DATA / "classic" / "hand_6k.off")
+    assert (hand.n_vertices, hand.n_faces) == (6338, 12672)

@@ -1,0 +1,21 @@
+#!/bin/sh
+# Best-effort install of CHOLMOD (scikit-sparse, the [fast] extra) into the virtual environment $1/..
+# Needs Debian's libsuitesparse-dev; installs it when running as root with apt-get available.
+# Without it hamsa still works and falls back to SciPy's SuperLU (slower), saying so once.
+BIN="$1"
+if "$BIN/python" -c "import sksparse.cholmod" 2>/dev/null; then
+    exit 0
+fi
+if [ ! -f /usr/include/suitesparse/cholmod.h ] && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    echo "installing libsuitesparse-dev (for CHOLMOD) ..."
+    (apt-get install -y -qq libsuitesparse-dev >/dev/null 2>&1 \
+        || (apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq libsuitesparse-dev >/dev/null 2>&1)) \
+        || echo "could not install libsuitesparse-dev"
+fi
+# scikit-sparse 0.5 does not build against Debian 12's SuiteSparse 5.12; 0.4.x does.
+if "$BIN/pip" install -q "scikit-sparse>=0.4.12,<0.5" >/dev/null 2>&1; then
+    echo "CHOLMOD (scikit-sparse) installed"
+else
+    echo "notice: CHOLMOD (scikit-sparse) could not be built; hamsa will use SciPy's SuperLU (slower)."
+fi
+exit 0
