@@ -391,6 +391,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     AQ[:, :width] = mass(Q[:, :width])
     f0, f1 = 0, width  # frontier columns
     solves, cycles = 0, 1
+    since_check, check_every = 0, max(1, wanted // (4 * block))
     while True:
         frontier = Q[:, f0:f1]
         Z = factor.solve(mass(frontier))
@@ -409,26 +410,31 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
             Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
             B = np.zeros((Qn.shape[1], f1 - f0))
         bn = Qn.shape[1]
-        coupling = np.zeros((bn, f1))  # T[new, closed]
-        coupling[:, f0:f1] = B
-        # Rayleigh-Ritz on the closed part
-        theta, Y = np.linalg.eigh(T[:f1, :f1])
-        theta, Y = theta[::-1], Y[:, ::-1]  # dominant first = smallest E first
-        m = min(wanted, f1)
-        W = coupling @ Y[:, :m]  # (bn, m): S x_i - theta_i x_i = Qn W[:, i]
-        if bn:
-            KQn = H @ Qn - shift * AQn
-            gram = KQn.T @ (KQn * mass.inverse_diagonal[:, None])
-            residual_norm = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, gram @ W), 0.0)) / np.abs(theta[:m])
-        else:
-            residual_norm = np.zeros(m)
-        E = shift + 1.0 / theta[:m]
-        scale = np.maximum(np.abs(E), 1e-2 * np.abs(E[min(k, m) - 1]))
-        residual = residual_norm / scale
-        if m >= k and np.all(residual[:k] <= tol):
-            X = Q[:, :f1] @ Y[:, :k]
-            return E[:k], X, SolveInfo("krylov", cycles, solves, float(residual[:k].max()), shift=shift)
-        if f1 + 2 * bn > capacity or bn == 0:  # thick restart: keep the best `wanted` Ritz vectors
+        T[f1 : f1 + bn, f0:f1] = B
+        T[f0:f1, f1 : f1 + bn] = B.T
+        since_check += 1
+        restart = f1 + 2 * bn > capacity or bn == 0
+        # Rayleigh-Ritz on the closed part, every few blocks (an eigh of T per block would cost more
+        # than the solves) and before every restart
+        if restart or (f1 >= wanted and since_check >= check_every):
+            since_check = 0
+            theta, Y = np.linalg.eigh(T[:f1, :f1])
+            theta, Y = theta[::-1], Y[:, ::-1]  # dominant first = smallest E first
+            m = min(wanted, f1)
+            W = T[f1 : f1 + bn, :f1] @ Y[:, :m]  # (bn, m): S x_i - theta_i x_i = Qn W[:, i]
+            if bn:
+                KQn = H @ Qn - shift * AQn
+                gram = KQn.T @ (KQn * mass.inverse_diagonal[:, None])
+                residual_norm = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, gram @ W), 0.0)) / np.abs(theta[:m])
+            else:
+                residual_norm = np.zeros(m)
+            E = shift + 1.0 / theta[:m]
+            scale = np.maximum(np.abs(E), 1e-2 * np.abs(E[min(k, m) - 1]))
+            residual = residual_norm / scale
+            if m >= k and np.all(residual[:k] <= tol):
+                X = Q[:, :f1] @ Y[:, :k]
+                return E[:k], X, SolveInfo("krylov", cycles, solves, float(residual[:k].max()), shift=shift)
+        if restart:  # thick restart: keep the best `wanted` Ritz vectors
             cycles += 1
             if cycles > max_cycles:
                 raise SolverError(
@@ -440,8 +446,8 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
             AQ[:, :p] = AQ[:, :f1] @ Y[:, :p]
             T[:] = 0.0
             T[np.arange(p), np.arange(p)] = theta[:p]
-            T[p : p + bn, :p] = W[:, :p]
-            T[:p, p : p + bn] = W[:, :p].T
+            T[p : p + bn, :p] = W
+            T[:p, p : p + bn] = W.T
             f0, f1 = p, p + bn
         else:
             f0, f1 = f1, f1 + bn
