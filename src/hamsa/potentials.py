@@ -1,19 +1,23 @@
-"""Potentials V on a mesh: functions mesh -> (n,) float64 arrays, in units of 1/length^2.
+"""Potentials V on a mesh: functions returning (n,) float64 arrays (units 1/length^2 once scaled).
 
-Only the step potential lives here so far (the paper's section 2.3 and Fig. 2); the geometric,
-geodesic, eigenfunction-sum and texture potentials build on the same conventions.
+Each function documents its normalization. Scale matters: the effect of V on the eigenbasis depends
+on ``mu * V`` relative to the spectrum (see :func:`hamsa.theory.critical_potential_scale`), so the
+shape-derived potentials here are normalized to a fixed range and the caller picks the scale.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hamsa.errors import PotentialError
-from hamsa.mesh import as_trimesh
+from hamsa.eigen import Eigenbasis
+from hamsa.errors import HamsaError, PotentialError
+from hamsa.geodesic import geodesic_distance as _heat_geodesic
+from hamsa.mesh import TriMesh, as_trimesh
+from hamsa.operators import stiffness_matrix, vertex_areas
 
 
 def step(mesh, region, height: float, threshold: float | None = None) -> np.ndarray:
-    """Finite step potential: ``V = height`` on a region of the surface, 0 elsewhere.
+    """Finite step potential: ``V = height`` on a region of the surface, 0 elsewhere (paper 2.3).
 
     Parameters
     ----------
@@ -22,7 +26,7 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
         The vertices where V = height: a mask, or the vertices whose field value is > threshold.
     height : float
         V0, in units of 1/length^2 (comparable to the eigenvalues: modes with E < V0 are
-        concentrated where V = 0, paper section 2.3 and Fig. 2).
+        concentrated where V = 0, paper Fig. 2).
     threshold : float, optional
         Required when ``region`` is a scalar field.
 
@@ -45,3 +49,121 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
     if not np.isfinite(height):
         raise PotentialError(f"step height must be finite, got {height}")
     return np.where(mask, float(height), 0.0)
+
+
+def geodesic_distance(mesh, sources, normalize: bool = True) -> np.ndarray:
+    """Geodesic distance from the nearest of ``sources`` (heat method, :mod:`hamsa.geodesic`).
+
+    With ``normalize=True`` (default) the distance is divided by its maximum, so V is in [0, 1]
+    (0 at the landmarks): the paper's landmark potential for ICSKM and the diffusion figure.
+    """
+    distance = _heat_geodesic(mesh, sources)
+    if not normalize:
+        return distance
+    finite = np.isfinite(distance)
+    if not np.all(finite):
+        raise PotentialError("some connected components contain no source; their distance is infinite")
+    return distance / distance.max()
+
+
+def eigenfunction_sum(basis: Eigenbasis, indices=(1, 2, 3, 4), signs=None) -> np.ndarray:
+    """The paper's matching potential: a normalized sum of LBO eigenfunctions, shifted to be >= 0.
+
+    ``V = s / max|s| - min(s / max|s|)`` with ``s = sum_j sign_j phi_{indices[j]}`` (0-based indices,
+    so the default is phi_2..phi_5, the first four non-constant ones). V lies in [0, 2].
+
+    Parameters
+    ----------
+    basis : Eigenbasis of the LBO
+    indices : sequence of int
+    signs : sequence of +-1, optional
+        Eigenfunction signs are arbitrary; across shapes they must agree for the potentials to
+        correspond (the paper assumes it). Pass signs resolved e.g. by ground truth or by moments.
+    """
+    indices = np.asarray(indices)
+    if indices.size == 0 or indices.min() < 0 or indices.max() >= basis.k:
+        raise PotentialError(f"eigenfunction indices {indices.tolist()} are outside the basis (k = {basis.k})")
+    signs = np.ones(indices.size) if signs is None else np.asarray(signs, dtype=np.float64)
+    if signs.shape != indices.shape or not np.all(np.abs(signs) == 1):
+        raise PotentialError("signs must be one +1 or -1 per index")
+    total = basis.vectors[:, indices] @ signs
+    total = total / np.abs(total).max()
+    return total - total.min()
+
+
+def area_distortion(mesh_a, mesh_b, correspondence=None) -> np.ndarray:
+    """Local area distortion of a map between two shapes (paper eq. stablePotential), on mesh_a's vertices.
+
+    ``V(i) = max(a_A(i) / a_B(c(i)), a_B(c(i)) / a_A(i)) >= 1`` with a the mixed-Voronoi vertex areas
+    after scaling both meshes to unit total area, and c the correspondence (vertex i of A -> vertex
+    c[i] of B; default the identity, for meshes that share vertex indexing).
+    """
+    a, b = as_trimesh(mesh_a), as_trimesh(mesh_b)
+    c = np.arange(a.n_vertices) if correspondence is None else np.asarray(correspondence)
+    if c.shape != (a.n_vertices,) or not np.issubdtype(c.dtype, np.integer):
+        raise PotentialError(f"correspondence must be (n_a,) = ({a.n_vertices},) integer indices into mesh_b")
+    if c.min() < 0 or c.max() >= b.n_vertices:
+        raise PotentialError(f"correspondence indices must be in [0, {b.n_vertices})")
+    area_a = vertex_areas(a) / a.area
+    area_b = vertex_areas(b)[c] / b.area
+    ratio = area_a / area_b
+    return np.maximum(ratio, 1.0 / ratio)
+
+
+def from_vertex_colors(mesh, colors) -> np.ndarray:
+    """Texture potential: Rec. 709 luminance ``0.2126 R + 0.7152 G + 0.0722 B`` in [0, 1].
+
+    ``colors`` is (n, 3) or (n, 4) (alpha ignored), floats in [0, 1] or integers in [0, 255].
+    """
+    mesh = as_trimesh(mesh)
+    rgb = np.asarray(colors)
+    if rgb.ndim != 2 or rgb.shape[0] != mesh.n_vertices or rgb.shape[1] not in (3, 4):
+        raise PotentialError(f"colors must be (n, 3) or (n, 4) with n = {mesh.n_vertices}, got {rgb.shape}")
+    rgb = rgb[:, :3].astype(np.float64)
+    if np.issubdtype(np.asarray(colors).dtype, np.integer):
+        rgb /= 255.0
+    if not np.all(np.isfinite(rgb)) or rgb.min() < 0 or rgb.max() > 1:
+        raise PotentialError("colors must be in [0, 1] (floats) or [0, 255] (integers)")
+    return rgb @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def curvature(mesh, kind: str = "mean") -> np.ndarray:
+    """Discrete curvature per vertex (Meyer et al. 2003), in 1/length (mean) or 1/length^2 (gaussian).
+
+    ``"mean"``: H = |W X|_i / (2 a_i), signed positive where the surface is convex (the mean-curvature
+    normal W X / a points inward; sign from the area-weighted vertex normal). ``"gaussian"``:
+    K = (2 pi - sum of angles) / a_i at interior vertices, (pi - sum) / a_i on the boundary (there it
+    also counts the boundary's turning angle, e.g. (pi/2) / a_i at a rectangle's corner).
+    ``"absolute_mean"``: |H|.
+    """
+    mesh = as_trimesh(mesh)
+    mesh.require_operator_ready()
+    areas = vertex_areas(mesh)
+    if kind in ("mean", "absolute_mean"):
+        laplacian = stiffness_matrix(mesh) @ mesh.vertices  # = -(cotan Laplacian) X = 2 a H n (inward-pointing for convex)
+        value = np.linalg.norm(laplacian, axis=1) / (2 * areas)
+        if kind == "absolute_mean":
+            return value
+        return value * np.sign(np.einsum("ij,ij->i", laplacian, _vertex_normals(mesh)) + 0.0)
+    if kind == "gaussian":
+        v, f = mesh.vertices, mesh.faces
+        angles = np.zeros(mesh.n_vertices)
+        for c in range(3):
+            a = v[f[:, (c + 1) % 3]] - v[f[:, c]]
+            b = v[f[:, (c + 2) % 3]] - v[f[:, c]]
+            angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+            angles += np.bincount(f[:, c], weights=angle, minlength=mesh.n_vertices)
+        full = np.full(mesh.n_vertices, 2 * np.pi)
+        boundary = np.unique(mesh.boundary_edges)
+        full[boundary] = np.pi
+        return (full - angles) / areas
+    raise HamsaError(f"curvature kind must be 'mean', 'absolute_mean' or 'gaussian', got {kind!r}")
+
+
+def _vertex_normals(mesh: TriMesh) -> np.ndarray:
+    v, f = mesh.vertices, mesh.faces
+    face_normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    normals = np.zeros_like(v)
+    for c in range(3):
+        np.add.at(normals, f[:, c], face_normal)
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)

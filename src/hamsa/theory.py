@@ -50,3 +50,25 @@ def mass_fraction(basis: Eigenbasis, region) -> np.ndarray:
     inside = (weights[region, None] * basis.vectors[region] ** 2).sum(axis=0)
     total = (weights[:, None] * basis.vectors**2).sum(axis=0)
     return inside / total
+
+
+def critical_potential_scale(lbo_basis: Eigenbasis, potential, index: int) -> float:
+    """The paper's bound on the potential scale mu (eq. mu_potential), for eigenpair ``index`` (0-based).
+
+    To first order ``E_i(mu) ~ lambda_i + mu <phi_i, V phi_i>_A``; requiring ``E_i > mu max V`` gives
+    ``mu < lambda_i / (max V - <phi_i, V phi_i>_A)``. The paper writes psi_i in the denominator, but
+    psi_i depends on mu; the first-order derivation uses the LBO eigenfunction phi_i (NOTES.md T2).
+
+    Returns +inf when the denominator is <= 0 (phi_i already sits where V is maximal).
+    """
+    if not 0 <= index < lbo_basis.k:
+        raise HamsaError(f"index {index} is outside the basis (k = {lbo_basis.k})")
+    v = np.asarray(potential, dtype=np.float64)
+    if v.shape != (lbo_basis.n,) or not np.all(np.isfinite(v)):
+        raise PotentialError(f"potential must be a finite ({lbo_basis.n},) array")
+    phi = lbo_basis.vectors[:, index]
+    expectation = phi @ (lbo_basis.mass @ (v * phi))
+    denominator = v.max() - expectation
+    if denominator <= 0:
+        return float("inf")
+    return float(lbo_basis.values[index] / denominator)

@@ -1,0 +1,113 @@
+"""Geodesic distances by the heat method (Crane, Weischedel, Wardetzky 2013), on hamsa's own operators.
+
+1. Diffuse heat from the sources for a short time t: ``(A + t W) u = A delta``.
+2. Normalize its gradient per face: ``X = -grad u / |grad u|``.
+3. Recover the distance from ``W phi = -div X`` (our W is PSD, so the sign flips from the paper's L).
+Accuracy: with the default ``t = h^2`` (h the mean edge length) the error is first order in h; on a
+unit sphere the mean relative error against great-circle distances measured 1.9% at 2k vertices and
+1.5% at 10k, the largest (about 6% at 10k) near the source's cut locus (``tests/test_geodesic.py``). Boundaries get the Neumann solution only. Vertices in
+connected components without a source get ``inf``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hamsa.errors import HamsaError
+from hamsa.factorization import CholeskySolver
+from hamsa.mesh import as_trimesh
+from hamsa.operators import mass_matrix, stiffness_matrix
+
+
+def face_gradients(mesh, f: np.ndarray) -> np.ndarray:
+    """Per-face gradient of a P1 function: ``sum_v f_v (N x e_v) / (2 area)``, shape (m, 3) (or (m, 3, d)).
+
+    e_v is the edge opposite vertex v, oriented along the face, N the unit face normal.
+    """
+    mesh = as_trimesh(mesh)
+    v, faces = mesh.vertices, mesh.faces
+    p = [v[faces[:, c]] for c in range(3)]
+    normal = np.cross(p[1] - p[0], p[2] - p[0])
+    double_area = np.linalg.norm(normal, axis=1)
+    normal /= double_area[:, None]
+    grad = 0.0
+    for c in range(3):
+        edge = p[(c + 2) % 3] - p[(c + 1) % 3]
+        rotated = np.cross(normal, edge) / double_area[:, None]
+        values = f[faces[:, c]]
+        grad = grad + (rotated * values[:, None] if values.ndim == 1 else rotated[:, :, None] * values[:, None, :])
+    return grad
+
+
+class GeodesicSolver:
+    """Heat-method distances with both factorizations computed once, for many source sets.
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+    t : float, optional
+        Diffusion time; default the squared mean edge length.
+    """
+
+    def __init__(self, mesh, t: float | None = None):
+        self.mesh = as_trimesh(mesh)
+        self.mesh.require_operator_ready()
+        W = stiffness_matrix(self.mesh)
+        self._mass = mass_matrix(self.mesh)
+        self.t = self.mesh.mean_edge_length**2 if t is None else float(t)
+        self._heat = CholeskySolver((self._mass + self.t * W).tocsc())
+        # W is singular (constants); a tiny mass shift makes it definite without moving the solution,
+        # since the divergence sums to zero on every component.
+        self._poisson = CholeskySolver((W + 1e-10 * W.diagonal().mean() / self._mass.diagonal().mean() * self._mass).tocsc())
+        self._components = self.mesh.vertex_components[1]
+        self._corners = [self.mesh.vertices[self.mesh.faces[:, c]] for c in range(3)]
+
+    def distance(self, sources) -> np.ndarray:
+        """(n,) distances from the nearest of ``sources`` (vertex indices), 0 at the sources."""
+        mesh = self.mesh
+        index = np.atleast_1d(np.asarray(sources))
+        if index.size == 0:
+            raise HamsaError("no source vertices given")
+        if not np.issubdtype(index.dtype, np.integer) or index.min() < 0 or index.max() >= mesh.n_vertices:
+            raise HamsaError(f"source vertices must be integers in [0, {mesh.n_vertices}), got {sources!r}")
+        delta = np.zeros(mesh.n_vertices)
+        delta[index] = self._mass.diagonal()[index]
+        u = self._heat.solve(delta)
+        grad = face_gradients(mesh, u)
+        norm = np.linalg.norm(grad, axis=1)
+        X = -grad / np.where(norm > 0, norm, 1.0)[:, None]
+        divergence = self._divergence(X)
+        phi = self._poisson.solve(-divergence)
+        reached = np.isin(self._components, self._components[index])
+        distance = np.full(mesh.n_vertices, np.inf)
+        for component in np.unique(self._components[index]):
+            members = self._components == component
+            at_sources = index[self._components[index] == component]
+            distance[members] = phi[members] - phi[at_sources].min()
+        distance[reached] = np.maximum(distance[reached], 0.0)
+        distance[index] = 0.0  # with several sources the heat method's values there differ by O(h)
+        return distance
+
+    def _divergence(self, X: np.ndarray) -> np.ndarray:
+        """Integrated divergence at each vertex: ``1/2 sum_faces (cot a (e1 . X) + cot b (e2 . X))``."""
+        faces = self.mesh.faces
+        p = self._corners
+        out = np.zeros(self.mesh.n_vertices)
+        for c in range(3):
+            i, j, k = c, (c + 1) % 3, (c + 2) % 3
+            e1, e2 = p[j] - p[i], p[k] - p[i]
+            # cot of the angle at k (opposite e1) and at j (opposite e2)
+            cot_k = _cot(p[i] - p[k], p[j] - p[k])
+            cot_j = _cot(p[i] - p[j], p[k] - p[j])
+            value = 0.5 * (cot_k * np.einsum("ij,ij->i", e1, X) + cot_j * np.einsum("ij,ij->i", e2, X))
+            out += np.bincount(faces[:, i], weights=value, minlength=self.mesh.n_vertices)
+        return out
+
+
+def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b) / np.linalg.norm(np.cross(a, b), axis=1)
+
+
+def geodesic_distance(mesh, sources, t: float | None = None) -> np.ndarray:
+    """Heat-method geodesic distance (n,) from the nearest source vertex; see :class:`GeodesicSolver`."""
+    return GeodesicSolver(mesh, t).distance(sources)

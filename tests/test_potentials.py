@@ -1,0 +1,84 @@
+import numpy as np
+import pytest
+
+import hamsa
+from hamsa import PotentialError, potentials, shapes
+from hamsa.geodesic import geodesic_distance
+
+
+def test_step_from_mask_and_from_field():
+    mesh = shapes.icosphere(2)
+    z = mesh.vertices[:, 2]
+    np.testing.assert_array_equal(potentials.step(mesh, z > 0, 5.0), np.where(z > 0, 5.0, 0.0))
+    np.testing.assert_array_equal(potentials.step(mesh, z, 5.0, threshold=0.0), np.where(z > 0, 5.0, 0.0))
+    with pytest.raises(PotentialError, match="threshold"):
+        potentials.step(mesh, z, 5.0)
+    with pytest.raises(PotentialError, match="shape"):
+        potentials.step(mesh, z[:-1] > 0, 5.0)
+
+
+@pytest.mark.parametrize("n, mean_tol", [(2000, 0.025), (10000, 0.02)])
+def test_heat_method_geodesics_on_the_sphere(n, mean_tol):
+    mesh = shapes.sphere(n)
+    distance = geodesic_distance(mesh, [0])
+    exact = np.arccos(np.clip(mesh.vertices @ mesh.vertices[0], -1, 1))
+    far = exact > 0.2
+    relative = np.abs(distance - exact)[far] / exact[far]
+    assert distance[0] == 0 and relative.mean() < mean_tol and relative.max() < 0.15
+
+
+def test_geodesic_potential_is_normalized_and_multi_source():
+    mesh = shapes.sphere(3000)
+    V = potentials.geodesic_distance(mesh, [0, 1500])
+    assert V.min() == 0 and V.max() == 1 and V[0] == 0 and V[1500] == 0
+
+
+def test_geodesic_of_unreached_component_is_infinite():
+    a = shapes.icosphere(2)
+    two = hamsa.TriMesh(np.vstack([a.vertices, a.vertices + 5]), np.vstack([a.faces, a.faces + a.n_vertices]))
+    d = geodesic_distance(two, [0])
+    assert np.all(np.isfinite(d[: a.n_vertices])) and np.all(np.isinf(d[a.n_vertices :]))
+    with pytest.raises(PotentialError, match="no source"):
+        potentials.geodesic_distance(two, [0])
+
+
+def test_eigenfunction_sum_range_and_signs():
+    basis = hamsa.eigenbasis(shapes.capsule(), 8)
+    V = potentials.eigenfunction_sum(basis)
+    assert V.min() == 0 and np.isclose(V.max() - V.min(), V.max())
+    s = basis.vectors[:, 1:5].sum(axis=1)
+    np.testing.assert_allclose(V, s / np.abs(s).max() - (s / np.abs(s).max()).min())
+    flipped = potentials.eigenfunction_sum(basis, signs=[-1, 1, 1, 1])
+    assert not np.allclose(flipped, V)
+
+
+def test_area_distortion_of_a_scaled_copy_is_one_and_detects_stretch():
+    mesh = shapes.sphere(1000)
+    scaled = hamsa.TriMesh(mesh.vertices * 3.0, mesh.faces)
+    np.testing.assert_allclose(potentials.area_distortion(mesh, scaled), 1.0, rtol=1e-12)
+    stretched = hamsa.TriMesh(mesh.vertices * [2.0, 1.0, 1.0], mesh.faces)
+    V = potentials.area_distortion(mesh, stretched)
+    assert V.min() >= 1.0 and V.max() > 1.3
+
+
+def test_texture_potential_luminance():
+    mesh = shapes.icosphere(1)
+    colors = np.zeros((mesh.n_vertices, 3), dtype=np.uint8)
+    colors[0] = [255, 255, 255]
+    colors[1] = [0, 255, 0]
+    V = potentials.from_vertex_colors(mesh, colors)
+    assert V[0] == pytest.approx(1.0) and V[1] == pytest.approx(0.7152) and V[2] == 0
+    with pytest.raises(PotentialError, match=r"\[0, 1\]"):
+        potentials.from_vertex_colors(mesh, np.full((mesh.n_vertices, 3), 2.0))
+
+
+def test_curvature_of_spheres_and_plane():
+    sphere = shapes.sphere(5000, radius=2.0)
+    for kind, exact in (("mean", 0.5), ("gaussian", 0.25)):
+        error = np.abs(potentials.curvature(sphere, kind) / exact - 1)
+        assert np.median(error) < 0.005 and error.max() < 0.05  # the lattice's two end vertices are irregular
+    plane = shapes.rectangle(1, 1, 10, 10)
+    gaussian = potentials.curvature(plane, "gaussian")
+    corners = np.isin(np.arange(plane.n_vertices), [0, 10, 110, 120])
+    assert np.abs(gaussian[~corners]).max() < 1e-9  # corners carry the boundary's turning angle
+    assert np.abs(potentials.curvature(plane, "mean")).max() < 1e-9
