@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 demo: $(VENV)/.fast
 	$(BIN)/hamsa demo
 
-test: $(VENV)/.fast $(VENV)/.test
+test: $(VENV)/.fast $(VENV)/.viz $(VENV)/.test
 	$(BIN)/python -m pytest
 
 bench: $(VENV)/.fast $(VENV)/.test
@@ -28,6 +28,12 @@ $(VENV)/.fast: $(VENV)/.core
 
 $(VENV)/.test: $(VENV)/.core
 	$(BIN)/pip install -q -e ".[test]"
+	touch $@
+
+# Rendering (pyvista) plus the system libraries for off-screen EGL; figures and their tests need it.
+$(VENV)/.viz: $(VENV)/.core
+	sh tools/install-render-libs.sh
+	$(BIN)/pip install -q -e ".[viz]"
 	touch $@
 
 clean:

@@ -94,14 +94,18 @@ def topological_noise(mesh, area_fraction: float = 0.3, hole_radius: float = 3.0
     return holed, kept
 
 
-def basis_stability(clean: Eigenbasis, perturbed: Eigenbasis, kept=None, count: int | None = None) -> np.ndarray:
+def basis_stability(
+    clean: Eigenbasis, perturbed: Eigenbasis, kept=None, count: int | None = None, cluster_rtol: float = 0.03
+) -> np.ndarray:
     """How well each clean eigenfunction survives a perturbation: (count,) values in [0, 1].
 
     Eigenfunctions are compared in the clean basis's A-inner product on the vertices both share
     (``kept``: original indices of the perturbed mesh's vertices, from :func:`topological_noise`).
-    Within a cluster of (near-)repeated eigenvalues the basis is arbitrary, so each clean mode gets the
-    norm of its projection onto the perturbed modes of the matching index range (the cosine of its
-    principal angle to that eigenspace); simple eigenvalues reduce to ``|<psi_i, psi~_i>_A|``.
+    Within a cluster of (near-)repeated eigenvalues the basis is arbitrary, and a perturbation mixes
+    eigenvectors whose eigenvalues are closer than its size (Davis-Kahan), so each clean mode gets the
+    norm of its projection onto the perturbed modes of its cluster's index range (the cosine of its
+    principal angle to that eigenspace). Clusters join consecutive clean eigenvalues closer than
+    ``cluster_rtol`` times the largest one; isolated eigenvalues reduce to ``|<psi_i, psi~_i>_A|``.
     """
     count = min(clean.k, perturbed.k) if count is None else count
     kept = np.arange(clean.n) if kept is None else np.asarray(kept)
@@ -113,7 +117,7 @@ def basis_stability(clean: Eigenbasis, perturbed: Eigenbasis, kept=None, count: 
     a = a / np.sqrt((weights[:, None] * a**2).sum(axis=0))
     b = b / np.sqrt((weights[:, None] * b**2).sum(axis=0))
     overlap = a.T @ (weights[:, None] * b)  # (count, count)
-    clusters = eigenvalue_clusters(clean.values[:count], rtol=1e-3)
+    clusters = eigenvalue_clusters(clean.values[:count], rtol=cluster_rtol)
     result = np.empty(count)
     for c in np.unique(clusters):
         members = np.flatnonzero(clusters == c)

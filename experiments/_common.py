@@ -1,0 +1,64 @@
+"""Shared plumbing of the experiment scripts: arguments, data lookup, atomic JSON output."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import hamsa
+from hamsa.io import atomic_write
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def parse_args(description: str, argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("-o", "--output", default="report", help="folder for the PNG and JSON files")
+    parser.add_argument("--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in shapes")
+    parser.add_argument("--quick", action="store_true", help="smaller sizes, for a fast check")
+    args = parser.parse_args(argv)
+    Path(args.output).mkdir(parents=True, exist_ok=True)
+    return args
+
+
+def data_file(data: str | None, relative: str) -> Path | None:
+    """The path of a dataset file when a data folder was given and holds it, else None."""
+    if not data:
+        return None
+    path = Path(data) / relative
+    return path if path.exists() else None
+
+
+def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:
+    """Scale to total area 1, centered: eigenvalues become comparable across shapes."""
+    vertices = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
+    return hamsa.TriMesh(vertices, mesh.faces)
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    return value
+
+
+def write_json(path: Path, numbers: dict) -> None:
+    with atomic_write(path, "w") as handle:
+        json.dump(_plain(numbers), handle, indent=2)
+
+
+class Timer:
+    def __init__(self):
+        self.start = time.perf_counter()
+
+    def __call__(self) -> float:
+        return round(time.perf_counter() - self.start, 2)
