@@ -26,7 +26,7 @@ def run(args) -> dict:
     timer = Timer()
     path = data_file(args.data, "tosca_hires/meshes/michael0.off.gz")
     if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael0", "xy"
+        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael0", "auto"
     else:
         mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 48)), "built-in capsule", "xz"
     count = 8

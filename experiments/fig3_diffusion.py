@@ -31,7 +31,8 @@ def run(args) -> dict:
     if path and landmarks and not args.quick:
         mesh = unit_area(hamsa.load_mesh(path))
         ids = np.loadtxt(landmarks, dtype=np.int64)[:, 0]
-        head, leg, name, view = int(ids[1]), int(ids[5]), "TOSCA centaur0", "xy"
+        # TOSCA's centaur stands along +z, facing -y: look at its side
+        head, leg, name, view = int(ids[1]), int(ids[5]), "TOSCA centaur0", ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
     else:
         mesh = unit_area(shapes.capsule(0.5, 3.0, 40))
         z = mesh.vertices[:, 2]

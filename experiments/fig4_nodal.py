@@ -25,7 +25,7 @@ def run(args) -> dict:
     timer = Timer()
     path = data_file(args.data, "tosca_hires/meshes/dog0.off.gz")
     if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA dog0", "xy"
+        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA dog0", "auto"
     else:
         mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 40)), "built-in capsule", "xz"
     lbo = hamsa.eigenbasis(mesh, 20)

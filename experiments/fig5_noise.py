@@ -27,7 +27,7 @@ def run(args) -> dict:
     timer = Timer()
     path = data_file(args.data, "tosca_hires/meshes/michael1.off.gz")
     if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael1", "xy"
+        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael1", "auto"
     else:
         mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 48)), "built-in capsule", "xz"
     k = 10

@@ -15,7 +15,7 @@ import numpy as np
 from hamsa.errors import HamsaError, MissingDependencyError
 from hamsa.mesh import as_trimesh
 
-VIEWS = ("xy", "xz", "yz", "yx", "zx", "zy", "iso")
+VIEWS = ("auto", "xy", "xz", "yz", "yx", "zx", "zy", "iso")
 
 
 def _pyvista():
@@ -48,7 +48,7 @@ def render_fields(
     shared_range: bool = False,
     columns: int | None = None,
     panel_size: tuple[int, int] = (320, 320),
-    view: str = "xy",
+    view="auto",
     zoom: float = 1.0,
 ) -> np.ndarray:
     """Render per-vertex scalar fields on a mesh as a grid of panels and save a PNG (atomically).
@@ -67,7 +67,9 @@ def render_fields(
     columns : int, optional
         Panels per row (default: all in one row up to 5).
     panel_size : (width, height) in pixels
-    view : one of "xy", "xz", "yz", "yx", "zx", "zy", "iso" (camera direction)
+    view : "auto" (default: look along the shape's thinnest principal axis with +z up, which shows a
+        standing or T-posed body from the front and an animal from the side), "xy", "xz", "yz", "yx", "zx", "zy", "iso", or
+        a pair (direction, up) of 3-vectors: the camera looks from ``center + direction``
     zoom : float
 
     Returns
@@ -81,8 +83,8 @@ def render_fields(
     meshes = list(mesh) if isinstance(mesh, (list, tuple)) and not _is_pair(mesh) else [mesh] * len(fields)
     if len(meshes) != len(fields):
         raise HamsaError(f"{len(meshes)} meshes for {len(fields)} fields")
-    if view not in VIEWS:
-        raise HamsaError(f"view must be one of {VIEWS}, got {view!r}")
+    if not (isinstance(view, str) and view in VIEWS) and np.shape(view) != (2, 3):
+        raise HamsaError(f"view must be one of {VIEWS} or a (direction, up) pair, got {view!r}")
     titles = [f"field {i}" for i in range(len(fields))] if titles is None else list(titles)
     columns = columns or min(len(fields), 5)
     rows = -(-len(fields) // columns)
@@ -110,7 +112,14 @@ def render_fields(
         )
         plotter.add_text(title, position="upper_edge", font_size=9, color="black")
         plotter.set_background("white")
-        plotter.view_isometric() if view == "iso" else getattr(plotter, f"view_{view}")()
+        if not isinstance(view, str):
+            _directed_view(plotter, poly.points, *np.asarray(view, dtype=np.float64))
+        elif view == "auto":
+            _principal_view(plotter, poly.points)
+        elif view == "iso":
+            plotter.view_isometric()
+        else:
+            getattr(plotter, f"view_{view}")()
         plotter.camera.zoom(zoom)
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent if str(path.parent) else ".")
@@ -123,6 +132,25 @@ def render_fields(
         if os.path.exists(tmp):
             os.unlink(tmp)
     return image
+
+
+def _principal_view(plotter, points: np.ndarray) -> None:
+    """Look along the thinnest principal axis; +z (TOSCA's up) is up unless it is that axis."""
+    _, _, axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)  # longest .. thinnest
+    direction = axes[2] if axes[2][np.argmax(np.abs(axes[2]))] > 0 else -axes[2]
+    z = np.array([0.0, 0.0, 1.0])
+    up = z - (z @ direction) * direction
+    if np.linalg.norm(up) < 0.3:
+        up = axes[0]
+    _directed_view(plotter, points, direction, up)
+
+
+def _directed_view(plotter, points: np.ndarray, direction: np.ndarray, up: np.ndarray) -> None:
+    center = points.mean(axis=0)
+    distance = 3.0 * np.linalg.norm(points.max(axis=0) - points.min(axis=0))
+    eye = center + distance * direction / np.linalg.norm(direction)
+    plotter.camera_position = [tuple(eye), tuple(center), tuple(up)]
+    plotter.reset_camera()
 
 
 def _is_pair(value) -> bool:
