@@ -56,3 +56,15 @@ def test_fig5_noise(tmp_path):
     numbers = run_experiment("fig5_noise", tmp_path)
     assert numbers["cases"]["potential noise"]["hamiltonian_mean_first5"] > 0.95
     assert numbers["cases"]["vertex noise"]["hamiltonian_mean_first5"] > 0.9
+
+
+def test_fig6_optimized_potential_beats_the_lbo(tmp_path):
+    numbers = run_experiment("fig6_optimize_1d", tmp_path)
+    assert numbers["parametrizations"]["signed"]["ratio"] > 10
+    assert numbers["parametrizations"]["square"]["ratio"] > 3
+
+
+def test_fig7_hand_like_reconstruction(tmp_path):
+    numbers = run_experiment("fig7_optimize_hand", tmp_path)
+    assert numbers["ratio"] > 1.5  # built-in capsule in quick mode; the hand itself is in test_optimize
+    assert (tmp_path / "fig7_potential.png").stat().st_size > 10_000

@@ -49,6 +49,15 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
     basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
 
+    optimize = commands.add_parser("optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)")
+    optimize.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    optimize.add_argument("-k", type=_positive_int, required=True, help="number of eigenvectors")
+    optimize.add_argument("--data", help="(n,) or (n, d) .npy to represent (default: the vertex coordinates)")
+    optimize.add_argument("-m", type=_positive_int, help="LBO eigenvectors of the reduced problem (default max(4k, k+100))")
+    optimize.add_argument("--iterations", type=_positive_int, default=100, help="L-BFGS iterations (default 100)")
+    optimize.add_argument("--square", action="store_true", help="optimize V = v^2 >= 0 instead of a signed V")
+    optimize.add_argument("-o", "--output", required=True, help="output .npy with the potential")
+
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
     demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
@@ -125,6 +134,35 @@ def _basis(args) -> None:
     print(f"wrote           {output}")
 
 
+def _optimize(args) -> None:
+    from hamsa.io import atomic_write, load_mesh
+    from hamsa.optimize import optimize_potential
+
+    output = Path(args.output)
+    if output.suffix != ".npy":
+        raise HamsaError(f"output '{output}' must end in .npy")
+    if not (output.parent if str(output.parent) else Path(".")).is_dir():
+        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    mesh = load_mesh(args.mesh)
+    if args.data:
+        try:
+            data = np.load(args.data, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise HamsaError(f"cannot read data '{args.data}': {exc}") from None
+    else:
+        data = mesh.vertices
+    start = time.perf_counter()
+    result = optimize_potential(mesh, data, args.k, m=args.m, parametrization="square" if args.square else "signed",
+                                max_iterations=args.iterations, progress=sys.stderr.isatty())
+    with atomic_write(output) as handle:
+        np.save(handle, result.potential)
+    print(f"representation error with k = {args.k}: LBO {result.lbo_loss:.4g}, optimized Hamiltonian "
+          f"{result.loss:.4g} ({result.ratio:.2f}x smaller)")
+    print(f"potential in [{result.potential.min():.4g}, {result.potential.max():.4g}], "
+          f"{len(result.history) - 1} iterations, {time.perf_counter() - start:.1f} s")
+    print(f"wrote           {output}")
+
+
 def _demo(args) -> None:
     from hamsa.demo import step_potential_demo
 
@@ -147,7 +185,7 @@ def _demo(args) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    handlers = {"info": _info, "basis": _basis, "demo": _demo}
+    handlers = {"info": _info, "basis": _basis, "optimize": _optimize, "demo": _demo}
     try:
         handlers[args.command](args)
     except HamsaError as exc:

@@ -1,0 +1,114 @@
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import hamsa
+from hamsa import HamsaError, shapes
+from hamsa.eigen import generalized_eigsh
+from hamsa.interval import interval_operators
+from hamsa.operators import hamiltonian
+from hamsa.optimize import ReducedRepresentationProblem, optimize_potential
+from conftest import data_mesh
+
+
+def _problem(W, A, X, k, m=None):
+    n = W.shape[0]
+    values, vectors, _ = generalized_eigsh(W, A, m or n, method="dense")
+    return ReducedRepresentationProblem(values, vectors, A.diagonal(), X, k)
+
+
+def _directional_fd(function, V, direction, h):
+    """Richardson-extrapolated central difference: O(h^4)."""
+    d1 = (function(V + h * direction) - function(V - h * direction)) / (2 * h)
+    d2 = (function(V + h / 2 * direction) - function(V - h / 2 * direction)) / h
+    return (4 * d2 - d1) / 3
+
+
+def _cases():
+    mesh = shapes.sphere(200)
+    X = mesh.vertices * (1 + 0.3 * mesh.vertices[:, [0]] ** 2)
+    W, A = hamiltonian(mesh)
+    W1, A1, x = interval_operators(120)
+    return {
+        "mesh, mass-weighted": (W, A, X),
+        "mesh, Euclidean": (W, sp.identity(200, format="csr"), X),
+        "1-D grid, mass-weighted": (W1, A1, x),
+        "1-D grid, Euclidean": (W1, sp.identity(120, format="csr"), x),
+    }
+
+
+@pytest.mark.parametrize("case", list(_cases()))
+@pytest.mark.parametrize("square", [False, True])
+def test_gradient_equals_finite_differences(case, square):
+    W, A, X = _cases()[case]
+    problem = _problem(W, A, X, k=10)
+    rng = np.random.default_rng(1)
+    n = W.shape[0]
+    scale = np.diag(problem.stiffness)[10]  # the 11th LBO eigenvalue
+    v = rng.random(n) * np.sqrt(scale) if square else (rng.random(n) - 0.3) * scale
+    to_V = (lambda v: v**2) if square else (lambda v: v)
+    loss, gradient = problem.loss_and_gradient(to_V(v))
+    if square:
+        gradient = 2 * v * gradient
+    for _ in range(3):
+        direction = rng.standard_normal(n)
+        fd = _directional_fd(lambda y: problem.loss(to_V(y)), v, direction, 1e-4 * np.abs(v).max())
+        assert gradient @ direction == pytest.approx(fd, rel=1e-5)
+
+
+def test_the_papers_closed_form_has_the_opposite_sign():
+    W, A, X = _cases()["mesh, Euclidean"]
+    n, k = W.shape[0], 10
+    V = np.random.default_rng(2).random(n) * 5
+    problem = _problem(W, A, X, k)
+    _, ours = problem.loss_and_gradient(V)
+    E, Psi = np.linalg.eigh((W + sp.diags(V)).toarray())
+    B = np.zeros((n, n))
+    off = ~np.eye(n, dtype=bool)
+    B[off] = 1.0 / (E[None, :] - E[:, None])[off]  # B_ij = 1/(lambda_j - lambda_i)
+    Z = np.zeros((n, n))
+    Z[:k] = Psi[:, :k].T @ X @ X.T @ Psi  # Z Psi_k^T X X^T Psi_n, zero below row k
+    paper = np.diag(-2 * Psi @ (Z * B) @ Psi.T)
+    # equal up to our stabilization epsilon of the eigenvalue gaps; the sign is the point
+    np.testing.assert_allclose(paper, -ours, rtol=1e-3, atol=1e-6 * np.abs(ours).max())
+
+
+def test_reduced_gradient_converges_to_the_full_one():
+    mesh = shapes.capsule(radius=0.5, length=2.0, n_around=20)
+    W, A = hamiltonian(mesh)
+    X = mesh.vertices
+    n, k = mesh.n_vertices, 10
+    V = np.random.default_rng(3).random(n) * 20
+    full = _problem(W, A, X, k).loss_and_gradient(V)[1]
+    errors = []
+    for m in (20, 40, 80, 160, 320):
+        reduced = _problem(W, A, X, k, m).loss_and_gradient(V)[1]
+        errors.append(np.linalg.norm(reduced - full) / np.linalg.norm(full))
+    assert all(later <= earlier * 1.05 for earlier, later in zip(errors, errors[1:]))
+    assert errors[-1] < 0.2 * errors[0]
+
+
+def test_one_dimensional_toy_drops_the_error_tenfold():
+    W, A, x = interval_operators(200)
+    result = optimize_potential((W, A), x, 15, mass_weighted=False, max_iterations=200)
+    assert result.loss <= 0.1 * result.lbo_loss
+    assert result.history[-1]["loss"] < result.history[0]["loss"]
+
+
+def test_bad_requests():
+    W, A, x = interval_operators(50)
+    with pytest.raises(HamsaError, match="rows"):
+        optimize_potential((W, A), x[:-1], 5)
+    with pytest.raises(HamsaError, match="parametrization"):
+        optimize_potential((W, A), x, 5, parametrization="cubic")
+    with pytest.raises(HamsaError, match="smaller than m"):
+        optimize_potential((W, A), x, 50)
+
+
+@pytest.mark.data
+def test_hand_reconstruction_error_halves():
+    mesh = data_mesh("classic/hand_6k.off")
+    mesh = hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
+    result = optimize_potential(mesh, mesh.vertices, 50, m=300, max_iterations=60)
+    assert result.loss <= 0.5 * result.lbo_loss
+    assert result.basis is not None and result.basis.k == 50
