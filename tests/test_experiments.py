@@ -68,3 +68,11 @@ def test_fig7_hand_like_reconstruction(tmp_path):
     numbers = run_experiment("fig7_optimize_hand", tmp_path)
     assert numbers["ratio"] > 1.5  # built-in capsule in quick mode; the hand itself is in test_optimize
     assert (tmp_path / "fig7_potential.png").stat().st_size > 10_000
+
+
+def test_fig8_rate_distortion_runs(tmp_path):
+    numbers = run_experiment("fig8_compression", tmp_path)
+    rows = numbers["rows"]
+    assert {r["method"] for r in rows} == {"mhb", "hamiltonian", "hamiltonian-opt"}
+    mhb = sorted((r["bpv"], r["rms_error"]) for r in rows if r["method"] == "mhb")
+    assert all(b[1] < a[1] for a, b in zip(mhb, mhb[1:]))  # more bits per vertex, less error

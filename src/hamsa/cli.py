@@ -58,6 +58,18 @@ def _parser() -> argparse.ArgumentParser:
     optimize.add_argument("--square", action="store_true", help="optimize V = v^2 >= 0 instead of a signed V")
     optimize.add_argument("-o", "--output", required=True, help="output .npy with the potential")
 
+    compress = commands.add_parser("compress", help="spectral geometry compression (Karni-Gotsman / Hamiltonian)")
+    compress.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    compress.add_argument("-o", "--output", required=True, help="output .hmz")
+    compress.add_argument("--coeffs", type=_positive_int, required=True, help="coefficients per coordinate")
+    compress.add_argument("--bits", type=_positive_int, default=12, help="bits per coefficient (default 12)")
+    compress.add_argument("--method", choices=("mhb", "hamiltonian", "hamiltonian-opt"), default="mhb")
+
+    decompress = commands.add_parser("decompress", help="rebuild a mesh from an .hmz file and the connectivity")
+    decompress.add_argument("compressed", help="the .hmz file")
+    decompress.add_argument("--faces", required=True, help="a mesh file with the connectivity (its coordinates are ignored)")
+    decompress.add_argument("-o", "--output", required=True, help="output mesh file")
+
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
     demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
@@ -163,6 +175,41 @@ def _optimize(args) -> None:
     print(f"wrote           {output}")
 
 
+def _compress(args) -> None:
+    from hamsa import compression
+    from hamsa.io import atomic_write, load_mesh
+
+    mesh = load_mesh(args.mesh)
+    start = time.perf_counter()
+    data = compression.encode(mesh, args.coeffs, args.bits, args.method)
+    with atomic_write(args.output) as handle:
+        handle.write(data)
+    size = compression.sizes(data)
+    decoded = compression.decode(data, mesh.faces)
+    print(f"{args.method}: {args.coeffs} coefficients x 3 at {args.bits} bits -> {len(data)} bytes, "
+          f"{size.bits_per_vertex:.2f} bits/vertex (payload)"
+          + (f", vertex order {size.permutation_bits / mesh.n_vertices:.2f} bits/vertex" if size.permutation_bits > 64 else ""))
+    print(f"Karni-Gotsman error {compression.karni_gotsman_error(mesh, decoded):.4g}, RMS / bbox diagonal "
+          f"{compression.rms_error(mesh, decoded):.4g}; {time.perf_counter() - start:.1f} s")
+    print(f"wrote           {args.output}")
+
+
+def _decompress(args) -> None:
+    from hamsa import compression
+    from hamsa.io import load_mesh, save_mesh
+    from hamsa.mesh import TriMesh
+
+    try:
+        with open(args.compressed, "rb") as handle:
+            data = handle.read()
+    except OSError as exc:
+        raise HamsaError(f"cannot read '{args.compressed}': {exc.strerror or exc}") from None
+    connectivity = load_mesh(args.faces)
+    vertices = compression.decode(data, connectivity.faces)
+    save_mesh(TriMesh(vertices, connectivity.faces), args.output)
+    print(f"wrote           {args.output} ({len(vertices)} vertices)")
+
+
 def _demo(args) -> None:
     from hamsa.demo import step_potential_demo
 
@@ -185,7 +232,8 @@ def _demo(args) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    handlers = {"info": _info, "basis": _basis, "optimize": _optimize, "demo": _demo}
+    handlers = {"info": _info, "basis": _basis, "optimize": _optimize, "compress": _compress,
+                "decompress": _decompress, "demo": _demo}
     try:
         handlers[args.command](args)
     except HamsaError as exc:

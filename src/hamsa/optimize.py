@@ -195,6 +195,7 @@ def optimize_potential(
     parametrization: str = "signed",
     mass_weighted: bool = True,
     max_iterations: int = 200,
+    rounds: int = 1,
     epsilon: float = 1e-8,
     progress: bool = False,
 ) -> OptimizationResult:
@@ -209,7 +210,11 @@ def optimize_potential(
         m >= n - 1 on small problems uses them all (the exact, full problem)
     parametrization : "signed" (V free, the paper's default "for performance") or "square" (V = v^2 >= 0)
     mass_weighted : the geometric (A-weighted) setting; False is the Euclidean one (A = I)
-    max_iterations : L-BFGS iterations
+    max_iterations : L-BFGS iterations in all
+    rounds : the reduced subspace is recomputed around the current V this many times (each costs one
+        sparse eigensolve of m eigenpairs); a round's step is kept only if the loss decreased. One round
+        suffices when V stays moderate (the hand); large potentials (e.g. on a combinatorial Laplacian)
+        leave the LBO subspace and need several
     epsilon : stabilization of the eigenvalue differences (relative)
     progress : show a progress bar (tqdm when installed) on stderr
 
@@ -227,15 +232,11 @@ def optimize_potential(
     m = min(n, max(4 * k, k + 100)) if m is None else min(int(m), n)
     if not k < m:
         raise HamsaError(f"k = {k} must be smaller than m = {m}")
-    # The reduced problem needs a good low-frequency subspace, not exact eigenvectors: a loose
-    # tolerance, with the stiffness projected exactly onto the basis we got.
-    _, lbo_vectors, _ = generalized_eigsh(W, A, m, tol=1e-5, method="dense" if m >= n - 1 or n <= 1500 else "auto")
-    problem = ReducedRepresentationProblem(lbo_vectors.T @ (W @ lbo_vectors), lbo_vectors, a, X, k, epsilon)
     history: list[dict] = []
     bar = _Progress(max_iterations, progress)
     start = time.perf_counter()
-
     last = {}
+    problem = None
 
     def objective(x):
         V = x if parametrization == "signed" else x**2
@@ -248,21 +249,48 @@ def optimize_potential(
     def record(x):
         # L-BFGS calls back with the iterate it last evaluated: reuse that evaluation
         loss, gradient = (last["loss"], last["gradient"]) if np.array_equal(last.get("x"), x) else objective(x)
-        history.append({"iteration": len(history) + 1, "loss": loss, "gradient_norm": float(np.linalg.norm(gradient)),
+        history.append({"iteration": len(history), "loss": loss, "gradient_norm": float(np.linalg.norm(gradient)),
                         "seconds": time.perf_counter() - start})
         bar.update(len(history), loss, history[-1]["gradient_norm"])
 
-    x0 = np.zeros(n) if parametrization == "signed" else np.full(n, 1e-3)
-    initial_loss, initial_gradient = objective(x0)
-    history.append({"iteration": 0, "loss": initial_loss, "gradient_norm": float(np.linalg.norm(initial_gradient)),
+    def subspace(V):
+        """m eigenvectors of H(V): the reduced problem is accurate near V. A loose tolerance suffices
+        (the stiffness is projected exactly onto whatever basis we get)."""
+        method = "dense" if m >= n - 1 or n <= 1500 else "auto"
+        _, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, m, tol=1e-5, lower_bound=float(V.min()),
+                                          method=method)
+        return ReducedRepresentationProblem(vectors.T @ (W @ vectors), vectors, a, X, k, epsilon)
+
+    x = np.zeros(n) if parametrization == "signed" else np.full(n, 1e-3)
+    to_V = (lambda y: y) if parametrization == "signed" else (lambda y: y**2)
+    problem = subspace(to_V(x))
+    lbo_loss = problem.loss(np.zeros(n)) if parametrization == "signed" else None
+    current = problem.loss(to_V(x))
+    history.append({"iteration": 0, "loss": current, "gradient_norm": float(np.linalg.norm(objective(x)[1])),
                     "seconds": 0.0})
+    per_round = max(1, max_iterations // rounds)
     try:
-        result = sopt.minimize(objective, x0, jac=True, method="L-BFGS-B", callback=record,
-                               options={"maxiter": max_iterations, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20})
+        for _ in range(rounds):
+            result = sopt.minimize(objective, x, jac=True, method="L-BFGS-B", callback=record,
+                                   options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20})
+            # Trust the reduced model only where it is accurate: re-center the subspace at the new V and
+            # accept the step only if the loss there (the true one, up to the loose basis) decreased;
+            # otherwise halve the step, up to four times.
+            step = result.x - x
+            for _ in range(5):
+                candidate = subspace(to_V(x + step))
+                value = candidate.loss(to_V(x + step))
+                if value < current:
+                    x, problem, current = x + step, candidate, value
+                    break
+                step = step / 2
+            else:
+                break
     finally:
         bar.close()
-    V = result.x if parametrization == "signed" else result.x**2
-    lbo_loss = problem.loss(np.zeros(n))  # Rayleigh-Ritz of V = 0 in the basis: the LBO's k eigenvectors
+    V = to_V(x)
+    if lbo_loss is None:
+        lbo_loss = subspace(np.zeros(n)).loss(np.zeros(n))
     values, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, k, lower_bound=float(V.min()))
     basis = None
     if isinstance(mesh_or_operators, TriMesh) and mass_weighted:
