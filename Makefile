@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench lint clean
 
 demo: $(VENV)/.fast
 	$(BIN)/hamsa demo
@@ -13,6 +13,10 @@ test: $(VENV)/.fast $(VENV)/.viz $(VENV)/.test
 
 bench: $(VENV)/.fast $(VENV)/.test
 	$(BIN)/python benchmarks/eigensolve.py
+
+lint: $(VENV)/.test
+	$(BIN)/python -m ruff check src tests experiments benchmarks
+	$(BIN)/python -m ruff format --check src tests experiments benchmarks
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)

@@ -79,8 +79,10 @@ def main(argv=None) -> int:
     if not args.no_data and david.exists():
         meshes.append(("TOSCA david0", lambda: hamsa.load_mesh(david)))
     with_cholmod = HAVE_CHOLMOD and not args.no_cholmod_baseline
-    print(f"hamsa {hamsa.__version__}; hamsa backend: {'CHOLMOD' if HAVE_CHOLMOD else 'SuperLU'}; "
-          f"median of {args.repeat} run(s)")
+    print(
+        f"hamsa {hamsa.__version__}; hamsa backend: {'CHOLMOD' if HAVE_CHOLMOD else 'SuperLU'}; "
+        f"median of {args.repeat} run(s)"
+    )
     header = f"{'mesh':<18} {'n':>8} {'k':>4} {'hamsa s':>8} {'eigsh+SuperLU s':>16} {'ratio':>6}"
     if with_cholmod:
         header += f" {'eigsh+CHOLMOD s':>16} {'ratio':>6}"
@@ -92,7 +94,9 @@ def main(argv=None) -> int:
         for k in args.k:
             t_hamsa, basis = median_time(lambda: hamsa.eigenbasis(mesh, k, method="krylov"), args.repeat)
             t_superlu, reference = median_time(lambda: eigsh_superlu(H, A, k), args.repeat)
-            row = f"{name:<18} {mesh.n_vertices:>8} {k:>4} {t_hamsa:>8.2f} {t_superlu:>16.2f} {t_superlu / t_hamsa:>6.2f}"
+            row = (
+                f"{name:<18} {mesh.n_vertices:>8} {k:>4} {t_hamsa:>8.2f} {t_superlu:>16.2f} {t_superlu / t_hamsa:>6.2f}"
+            )
             if with_cholmod:
                 t_cholmod, _ = median_time(lambda: eigsh_cholmod(H, A, k), args.repeat)
                 row += f" {t_cholmod:>16.2f} {t_cholmod / t_hamsa:>6.2f}"

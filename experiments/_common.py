@@ -18,7 +18,9 @@ DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 def parse_args(description: str, argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("-o", "--output", default="report", help="folder for the PNG and JSON files")
-    parser.add_argument("--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in shapes")
+    parser.add_argument(
+        "--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in shapes"
+    )
     parser.add_argument("--quick", action="store_true", help="smaller sizes, for a fast check")
     args = parser.parse_args(argv)
     Path(args.output).mkdir(parents=True, exist_ok=True)
@@ -31,6 +33,15 @@ def data_file(data: str | None, relative: str) -> Path | None:
         return None
     path = Path(data) / relative
     return path if path.exists() else None
+
+
+def dataset_or_builtin(args, relative: str, builtin):
+    """(mesh, name, from_data): the unit-area dataset mesh when --data holds it and not --quick, else
+    ``builtin()`` (a TriMesh), also scaled to unit area."""
+    path = data_file(args.data, relative)
+    if path and not args.quick:
+        return unit_area(hamsa.load_mesh(path)), f"TOSCA {Path(relative).name.split('.')[0]}", True
+    return unit_area(builtin()), "built-in capsule", False
 
 
 def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:

@@ -22,10 +22,10 @@ from scipy.optimize import brentq  # noqa: E402
 from scipy.special import eval_hermite, factorial  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, parse_args, write_json  # noqa: E402
-
 from hamsa.eigen import generalized_eigsh  # noqa: E402
 from hamsa.interval import interval_operators  # noqa: E402
+
+from _common import Timer, parse_args, write_json  # noqa: E402
 
 LENGTH = 1.0
 
@@ -62,7 +62,7 @@ def finite_well_levels(depth: float, half_width: float, count: int) -> np.ndarra
 
 def oscillator_function(n: int, y: np.ndarray, omega: float) -> np.ndarray:
     s = np.sqrt(omega) * y
-    return eval_hermite(n, s) * np.exp(-s**2 / 2) / np.sqrt(2.0**n * factorial(n) * np.sqrt(np.pi / omega))
+    return eval_hermite(n, s) * np.exp(-(s**2) / 2) / np.sqrt(2.0**n * factorial(n) * np.sqrt(np.pi / omega))
 
 
 def solve(V: np.ndarray, W, A, count: int):
@@ -80,8 +80,13 @@ def run(args) -> dict:
     # (a) box
     values, vectors = solve(np.zeros_like(x), W, A, count)
     exact = (np.arange(1, count + 1) * np.pi / LENGTH) ** 2
-    cases["box"] = dict(V=np.zeros_like(x), values=values, vectors=vectors, exact=exact,
-                        exact_vectors=[np.sqrt(2 / LENGTH) * np.sin((i + 1) * np.pi * x / LENGTH) for i in range(count)])
+    cases["box"] = dict(
+        V=np.zeros_like(x),
+        values=values,
+        vectors=vectors,
+        exact=exact,
+        exact_vectors=[np.sqrt(2 / LENGTH) * np.sin((i + 1) * np.pi * x / LENGTH) for i in range(count)],
+    )
     # (b) finite step well
     depth, half_width = 400.0, 0.2
     V = np.where(np.abs(x - 0.5) < half_width, 0.0, depth)
@@ -91,11 +96,20 @@ def run(args) -> dict:
     omega = 150.0
     V = omega**2 * (x - 0.5) ** 2
     values, vectors = solve(V, W, A, count)
-    cases["oscillator"] = dict(V=V, values=values, vectors=vectors, exact=(2 * np.arange(count) + 1) * omega,
-                               exact_vectors=[oscillator_function(i, x - 0.5, omega) for i in range(count)])
+    cases["oscillator"] = dict(
+        V=V,
+        values=values,
+        vectors=vectors,
+        exact=(2 * np.arange(count) + 1) * omega,
+        exact_vectors=[oscillator_function(i, x - 0.5, omega) for i in range(count)],
+    )
 
     figure, axes = plt.subplots(1, 3, figsize=(13, 4.2))
-    titles = {"box": "box (V = 0, walls)", "step": f"finite step (V0 = {depth:g})", "oscillator": f"oscillator (w = {omega:g})"}
+    titles = {
+        "box": "box (V = 0, walls)",
+        "step": f"finite step (V0 = {depth:g})",
+        "oscillator": f"oscillator (w = {omega:g})",
+    }
     numbers = {"grid_points": n}
     for axis, (name, case) in zip(axes, cases.items()):
         scale = 0.35 * (case["values"][1] - case["values"][0])
@@ -107,8 +121,12 @@ def run(args) -> dict:
             if "exact_vectors" in case:
                 ref = case["exact_vectors"][i]
                 ref = ref * np.sign(ref[np.argmax(np.abs(ref) > 1e-3 * np.abs(ref).max())])
-                axis.plot(x[::max(1, n // 40)], (case["exact"][i] + scale * ref / np.abs(ref).max())[::max(1, n // 40)],
-                          "k.", ms=3)
+                axis.plot(
+                    x[:: max(1, n // 40)],
+                    (case["exact"][i] + scale * ref / np.abs(ref).max())[:: max(1, n // 40)],
+                    "k.",
+                    ms=3,
+                )
             axis.axhline(case["exact"][i], color="k", lw=0.5, ls=":")
         axis.set_title(titles[name])
         axis.set_xlabel("x")

@@ -15,20 +15,19 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import potentials, shapes, viz  # noqa: E402
 from hamsa.theory import eigenvalue_bounds, mass_fraction  # noqa: E402
 
+from _common import Timer, dataset_or_builtin, parse_args, write_json  # noqa: E402
+
 
 def run(args) -> dict:
     timer = Timer()
-    path = data_file(args.data, "tosca_hires/meshes/michael0.off.gz")
-    if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael0", "auto"
-    else:
-        mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 48)), "built-in capsule", "xz"
+    mesh, name, from_data = dataset_or_builtin(
+        args, "tosca_hires/meshes/michael0.off.gz", lambda: shapes.capsule(0.5, 3.0, 48)
+    )
+    view = "auto" if from_data else "xz"
     count = 8
     lbo = hamsa.eigenbasis(mesh, 12)
     region = lbo.vectors[:, 1] > 0  # V = V0 here
@@ -41,15 +40,31 @@ def run(args) -> dict:
     fields = [np.abs(lbo.vectors[:, i]) for i in range(count)] + [np.abs(basis.vectors[:, i]) for i in range(count)]
     titles = [f"|phi{i + 1}| l={lbo.values[i]:.0f}" for i in range(count)]
     titles += [f"|psi{i + 1}| E={basis.values[i]:.0f} in:{100 * inside[i]:.0f}%" for i in range(count)]
-    viz.render_fields(mesh, fields, Path(args.output) / "fig2_step_potential.png", titles=titles, cmap="inferno",
-                      columns=count, view=view, panel_size=(240, 300), zoom=0.9)
+    viz.render_fields(
+        mesh,
+        fields,
+        Path(args.output) / "fig2_step_potential.png",
+        titles=titles,
+        cmap="inferno",
+        columns=count,
+        view=view,
+        panel_size=(240, 300),
+        zoom=0.9,
+    )
     numbers = {
-        "mesh": name, "n_vertices": mesh.n_vertices, "V0": height,
+        "mesh": name,
+        "n_vertices": mesh.n_vertices,
+        "V0": height,
         "area_fraction_V0": float(basis.mass.diagonal()[region].sum()),
-        "lbo_values": lbo.values[:count], "values": basis.values,
-        "theorem1_lower": lower, "theorem1_upper": upper,
-        "theorem1_holds": bool(np.all((lower - 1e-8 * upper.max() <= basis.values) & (basis.values <= upper * (1 + 1e-8)))),
-        "lbo_mass_in_V0_free_region": inside_lbo, "mass_in_V0_free_region": inside,
+        "lbo_values": lbo.values[:count],
+        "values": basis.values,
+        "theorem1_lower": lower,
+        "theorem1_upper": upper,
+        "theorem1_holds": bool(
+            np.all((lower - 1e-8 * upper.max() <= basis.values) & (basis.values <= upper * (1 + 1e-8)))
+        ),
+        "lbo_mass_in_V0_free_region": inside_lbo,
+        "mass_in_V0_free_region": inside,
         "trapped_mean_mass": float(inside[basis.values < height].mean()) if np.any(basis.values < height) else None,
         "seconds": timer(),
     }
@@ -59,5 +74,7 @@ def run(args) -> dict:
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    print(f"fig2 ({r['mesh']}): modes below V0 keep {100 * r['trapped_mean_mass']:.1f}% of their mass in V = 0 "
-          f"({r['seconds']} s)")
+    print(
+        f"fig2 ({r['mesh']}): modes below V0 keep {100 * r['trapped_mean_mass']:.1f}% of their mass in V = 0 "
+        f"({r['seconds']} s)"
+    )

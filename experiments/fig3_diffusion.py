@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import potentials, shapes, viz  # noqa: E402
 from hamsa.diffusion import heat_kernel, total_heat  # noqa: E402
 from hamsa.geodesic import GeodesicSolver  # noqa: E402
+
+from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
 
 
 def run(args) -> dict:
@@ -53,14 +53,37 @@ def run(args) -> dict:
             fields.append(np.log10(np.maximum(ut, 1e-3 * ut.max())))  # three decades
             titles.append(f"{label} t={t:.2g}")
             weights = np.maximum(ut, 0) * b.mass.diagonal()
-            rows.append({"operator": label, "t": t, "total_heat": h,
-                         "mean_distance_to_leg": float(weights @ distance_to_leg / weights.sum())})
+            rows.append(
+                {
+                    "operator": label,
+                    "t": t,
+                    "total_heat": h,
+                    "mean_distance_to_leg": float(weights @ distance_to_leg / weights.sum()),
+                }
+            )
     fields.append(V)
     titles.append("potential V")
-    viz.render_fields(mesh, fields, Path(args.output) / "fig3_diffusion.png", titles=titles, cmap="magma",
-                      columns=4, view=view, panel_size=(300, 300))
-    numbers = {"mesh": name, "n_vertices": mesh.n_vertices, "k": k, "mu": mu, "source_vertex": head,
-               "leg_vertex": leg, "times": times, "rows": rows, "seconds": timer()}
+    viz.render_fields(
+        mesh,
+        fields,
+        Path(args.output) / "fig3_diffusion.png",
+        titles=titles,
+        cmap="magma",
+        columns=4,
+        view=view,
+        panel_size=(300, 300),
+    )
+    numbers = {
+        "mesh": name,
+        "n_vertices": mesh.n_vertices,
+        "k": k,
+        "mu": mu,
+        "source_vertex": head,
+        "leg_vertex": leg,
+        "times": times,
+        "rows": rows,
+        "seconds": timer(),
+    }
     write_json(Path(args.output) / "fig3_diffusion.json", numbers)
     return numbers
 
@@ -68,5 +91,7 @@ def run(args) -> dict:
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     last = [row for row in r["rows"] if row["t"] == r["times"][-1]]
-    print(f"fig3 ({r['mesh']}): at the last time the heat's mean distance to the leg is "
-          f"{last[0]['mean_distance_to_leg']:.3f} (LBO) vs {last[1]['mean_distance_to_leg']:.3f} (H) ({r['seconds']} s)")
+    print(
+        f"fig3 ({r['mesh']}): at the last time the heat's mean distance to the leg is "
+        f"{last[0]['mean_distance_to_leg']:.3f} (LBO) vs {last[1]['mean_distance_to_leg']:.3f} (H) ({r['seconds']} s)"
+    )

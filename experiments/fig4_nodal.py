@@ -2,7 +2,8 @@
 
 For the LBO and two Hamiltonians (a step potential on one half of the shape, and the normalized
 geodesic distance from one extremity, both scaled by lambda_10 of the LBO), the nodal domains of
-the 4th-7th eigenfunctions (red/blue by sign, so the nodal lines show as white), and a Courant check (domains <= last index of the
+the 4th-7th eigenfunctions (red/blue by sign, so the nodal lines show as white), and a Courant
+check (domains <= last index of the
 eigenvalue's cluster) over the first 20 eigenfunctions. Writes fig4_nodal.png and .json.
 """
 
@@ -14,20 +15,19 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import potentials, shapes, viz  # noqa: E402
 from hamsa.nodal import courant_check, nodal_domains  # noqa: E402
 
+from _common import Timer, dataset_or_builtin, parse_args, write_json  # noqa: E402
+
 
 def run(args) -> dict:
     timer = Timer()
-    path = data_file(args.data, "tosca_hires/meshes/dog0.off.gz")
-    if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA dog0", "auto"
-    else:
-        mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 40)), "built-in capsule", "xz"
+    mesh, name, from_data = dataset_or_builtin(
+        args, "tosca_hires/meshes/dog0.off.gz", lambda: shapes.capsule(0.5, 3.0, 40)
+    )
+    view = "auto" if from_data else "xz"
     lbo = hamsa.eigenbasis(mesh, 20)
     scale = float(lbo.values[9])
     tip = int(np.argmax(lbo.vectors[:, 1]))
@@ -42,15 +42,27 @@ def run(args) -> dict:
         basis = lbo if V is None else hamsa.eigenbasis(mesh, 20, V)
         rows = courant_check(mesh, basis)
         numbers["operators"][label] = {
-            "values": basis.values, "domains": [r["domains"] for r in rows], "bounds": [r["bound"] for r in rows],
-            "courant_holds": all(r["holds"] for r in rows), "violations": [r["index"] for r in rows if not r["holds"]],
+            "values": basis.values,
+            "domains": [r["domains"] for r in rows],
+            "bounds": [r["bound"] for r in rows],
+            "courant_holds": all(r["holds"] for r in rows),
+            "violations": [r["index"] for r in rows if not r["holds"]],
         }
         for i in shown:
             count, _ = nodal_domains(mesh, basis.vectors[:, i])
             fields.append(basis.vectors[:, i])  # the nodal lines are the white curves between red and blue
             titles.append(f"{label} #{i + 1}: {count} domains")
-    viz.render_fields(mesh, fields, Path(args.output) / "fig4_nodal.png", titles=titles, cmap="RdBu_r",
-                      symmetric=True, columns=len(shown), view=view, panel_size=(260, 300))
+    viz.render_fields(
+        mesh,
+        fields,
+        Path(args.output) / "fig4_nodal.png",
+        titles=titles,
+        cmap="RdBu_r",
+        symmetric=True,
+        columns=len(shown),
+        view=view,
+        panel_size=(260, 300),
+    )
     numbers["seconds"] = timer()
     write_json(Path(args.output) / "fig4_nodal.json", numbers)
     return numbers
@@ -58,6 +70,8 @@ def run(args) -> dict:
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    summary = ", ".join(f"{k}: {'holds' if v['courant_holds'] else 'violated at ' + str(v['violations'])}"
-                        for k, v in r["operators"].items())
+    summary = ", ".join(
+        f"{k}: {'holds' if v['courant_holds'] else 'violated at ' + str(v['violations'])}"
+        for k, v in r["operators"].items()
+    )
     print(f"fig4 ({r['mesh']}): Courant over 20 eigenfunctions - {summary} ({r['seconds']} s)")

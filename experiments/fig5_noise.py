@@ -16,20 +16,19 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import potentials, shapes, viz  # noqa: E402
 from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise  # noqa: E402
 
+from _common import Timer, dataset_or_builtin, parse_args, write_json  # noqa: E402
+
 
 def run(args) -> dict:
     timer = Timer()
-    path = data_file(args.data, "tosca_hires/meshes/michael1.off.gz")
-    if path and not args.quick:
-        mesh, name, view = unit_area(hamsa.load_mesh(path)), "TOSCA michael1", "auto"
-    else:
-        mesh, name, view = unit_area(shapes.capsule(0.5, 3.0, 48)), "built-in capsule", "xz"
+    mesh, name, from_data = dataset_or_builtin(
+        args, "tosca_hires/meshes/michael1.off.gz", lambda: shapes.capsule(0.5, 3.0, 48)
+    )
+    view = "auto" if from_data else "xz"
     k = 10
     lbo = hamsa.eigenbasis(mesh, k)
     tip = int(np.argmax(lbo.vectors[:, 1]))
@@ -69,8 +68,17 @@ def run(args) -> dict:
     for label, case in numbers["cases"].items():
         case["hamiltonian_mean_first5"] = float(np.mean(case["hamiltonian_stability"][:5]))
         case["lbo_mean_first5"] = float(np.mean(case["lbo_stability"][:5]))
-    viz.render_fields(meshes, fields, Path(args.output) / "fig5_noise.png", titles=titles, cmap="RdBu_r",
-                      symmetric=True, columns=len(shown) * 2, view=view, panel_size=(240, 300))
+    viz.render_fields(
+        meshes,
+        fields,
+        Path(args.output) / "fig5_noise.png",
+        titles=titles,
+        cmap="RdBu_r",
+        symmetric=True,
+        columns=len(shown) * 2,
+        view=view,
+        panel_size=(240, 300),
+    )
     numbers["seconds"] = timer()
     write_json(Path(args.output) / "fig5_noise.json", numbers)
     return numbers
@@ -78,6 +86,7 @@ def run(args) -> dict:
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    summary = ", ".join(f"{k}: H {v['hamiltonian_mean_first5']:.3f} / LBO {v['lbo_mean_first5']:.3f}"
-                        for k, v in r["cases"].items())
+    summary = ", ".join(
+        f"{k}: H {v['hamiltonian_mean_first5']:.3f} / LBO {v['lbo_mean_first5']:.3f}" for k, v in r["cases"].items()
+    )
     print(f"fig5 ({r['mesh']}): mean stability of the first 5 modes - {summary} ({r['seconds']} s)")

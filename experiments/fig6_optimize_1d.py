@@ -19,11 +19,11 @@ import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, parse_args, write_json  # noqa: E402
-
 from hamsa.eigen import generalized_eigsh  # noqa: E402
 from hamsa.interval import interval_operators  # noqa: E402
 from hamsa.optimize import optimize_potential  # noqa: E402
+
+from _common import Timer, parse_args, write_json  # noqa: E402
 
 
 def run(args) -> dict:
@@ -47,9 +47,13 @@ def run(args) -> dict:
         axes[1].plot(x, psi @ (psi.T @ f), "--", label=f"Hamiltonian ({name})")
         axes[2].semilogy([h["iteration"] for h in result.history], [h["loss"] for h in result.history], label=name)
         numbers["parametrizations"][name] = {
-            "loss": result.loss, "lbo_loss": result.lbo_loss, "ratio": result.ratio,
-            "mean_V_near_ends": float(V[edge].mean()), "mean_V_interior": float(V[~edge].mean()),
-            "argmax_x": float(x[np.argmax(V)]), "argmin_x": float(x[np.argmin(V)]),
+            "loss": result.loss,
+            "lbo_loss": result.lbo_loss,
+            "ratio": result.ratio,
+            "mean_V_near_ends": float(V[edge].mean()),
+            "mean_V_interior": float(V[~edge].mean()),
+            "argmax_x": float(x[np.argmax(V)]),
+            "argmin_x": float(x[np.argmin(V)]),
             "high_near_boundary": bool(V[edge].mean() > V[~edge].mean()),
         }
     axes[0].set_title("optimized potential")
@@ -69,5 +73,7 @@ def run(args) -> dict:
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     for name, p in r["parametrizations"].items():
-        print(f"fig6 ({name}): loss {p['loss']:.3e} vs LBO {p['lbo_loss']:.3e} ({p['ratio']:.1f}x); V near the ends "
-              f"{p['mean_V_near_ends']:.3g}, interior {p['mean_V_interior']:.3g}")
+        print(
+            f"fig6 ({name}): loss {p['loss']:.3e} vs LBO {p['lbo_loss']:.3e} ({p['ratio']:.1f}x); V near the ends "
+            f"{p['mean_V_near_ends']:.3g}, interior {p['mean_V_interior']:.3g}"
+        )

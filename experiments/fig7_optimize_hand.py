@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import shapes, viz  # noqa: E402
 from hamsa.optimize import optimize_potential  # noqa: E402
+
+from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
 
 
 def run(args) -> dict:
@@ -41,18 +41,37 @@ def run(args) -> dict:
     error_h = np.linalg.norm(reconstruction - X, axis=1)
     top = max(error_lbo.max(), error_h.max())
     V = result.potential
-    viz.render_fields([mesh], [V], Path(args.output) / "fig7_potential.png", titles=["optimized V"], cmap="RdBu_r",
-                      symmetric=True, panel_size=(380, 380))
-    viz.render_fields([hamsa.TriMesh(lbo_reconstruction, mesh.faces), hamsa.TriMesh(reconstruction, mesh.faces)],
-                      [np.minimum(error_lbo, top), np.minimum(error_h, top)], Path(args.output) / "fig7_optimize_hand.png",
-                      titles=[f"LBO k={k}: error", f"Hamiltonian k={k}: error"], cmap="viridis", shared_range=True,
-                      panel_size=(380, 380))
+    viz.render_fields(
+        [mesh],
+        [V],
+        Path(args.output) / "fig7_potential.png",
+        titles=["optimized V"],
+        cmap="RdBu_r",
+        symmetric=True,
+        panel_size=(380, 380),
+    )
+    viz.render_fields(
+        [hamsa.TriMesh(lbo_reconstruction, mesh.faces), hamsa.TriMesh(reconstruction, mesh.faces)],
+        [np.minimum(error_lbo, top), np.minimum(error_h, top)],
+        Path(args.output) / "fig7_optimize_hand.png",
+        titles=[f"LBO k={k}: error", f"Hamiltonian k={k}: error"],
+        cmap="viridis",
+        shared_range=True,
+        panel_size=(380, 380),
+    )
     fingers = V < np.percentile(V, 10)
     numbers = {
-        "mesh": name, "n_vertices": mesh.n_vertices, "k": k, "m": m, "iterations": len(result.history) - 1,
-        "lbo_error": result.lbo_loss, "hamiltonian_error": result.loss, "ratio": result.ratio,
+        "mesh": name,
+        "n_vertices": mesh.n_vertices,
+        "k": k,
+        "m": m,
+        "iterations": len(result.history) - 1,
+        "lbo_error": result.lbo_loss,
+        "hamiltonian_error": result.loss,
+        "ratio": result.ratio,
         "paper": {"lbo_error": 0.0015, "hamiltonian_error": 0.00061, "ratio": 0.0015 / 0.00061},
-        "V_min": float(V.min()), "V_max": float(V.max()),
+        "V_min": float(V.min()),
+        "V_max": float(V.max()),
         "mean_lbo_error_where_V_lowest_10pct": float(error_lbo[fingers].mean()),
         "mean_lbo_error_elsewhere": float(error_lbo[~fingers].mean()),
         "seconds": timer(),
@@ -63,5 +82,7 @@ def run(args) -> dict:
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    print(f"fig7 ({r['mesh']}): error LBO {r['lbo_error']:.3g} vs optimized Hamiltonian {r['hamiltonian_error']:.3g} "
-          f"({r['ratio']:.2f}x; paper 2.46x) in {r['seconds']} s")
+    print(
+        f"fig7 ({r['mesh']}): error LBO {r['lbo_error']:.3g} vs optimized Hamiltonian {r['hamiltonian_error']:.3g} "
+        f"({r['ratio']:.2f}x; paper 2.46x) in {r['seconds']} s"
+    )

@@ -17,15 +17,14 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import Timer, data_file, parse_args, write_json  # noqa: E402
-
 import hamsa  # noqa: E402
 from hamsa import compression, shapes  # noqa: E402
 from hamsa.optimize import optimize_potential  # noqa: E402
+
+from _common import Timer, data_file, parse_args, write_json  # noqa: E402
 
 METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
 LABELS = {"mhb": "MHB", "hamiltonian": "H (alpha i + beta)", "hamiltonian-opt": "H opt (V not counted)"}
@@ -42,15 +41,31 @@ def run(args) -> dict:
     L = compression.combinatorial_laplacian(mesh.faces, n)
     rows = []
     for count in counts:
-        optimized = optimize_potential((L, sp.identity(n, format="csr")), mesh.vertices, count, m=min(n, 2 * count + 50),
-                                       mass_weighted=False, max_iterations=60, rounds=6)
+        optimized = optimize_potential(
+            (L, sp.identity(n, format="csr")),
+            mesh.vertices,
+            count,
+            m=min(n, 2 * count + 50),
+            mass_weighted=False,
+            max_iterations=60,
+            rounds=6,
+        )
         for method in METHODS:
             data = compression.encode(mesh, count, bits, method, potential=optimized.potential)
             decoded = compression.decode(data, mesh.faces)
             size = compression.sizes(data)
-            rows.append({"method": method, "coefficients": count, "bits": bits, "bpv": size.bits_per_vertex,
-                         "permutation_bpv": size.permutation_bits / n, "kg_error": compression.karni_gotsman_error(mesh, decoded),
-                         "rms_error": compression.rms_error(mesh, decoded), "representation_gain": optimized.ratio})
+            rows.append(
+                {
+                    "method": method,
+                    "coefficients": count,
+                    "bits": bits,
+                    "bpv": size.bits_per_vertex,
+                    "permutation_bpv": size.permutation_bits / n,
+                    "kg_error": compression.karni_gotsman_error(mesh, decoded),
+                    "rms_error": compression.rms_error(mesh, decoded),
+                    "representation_gain": optimized.ratio,
+                }
+            )
     figure, axes = plt.subplots(1, 2, figsize=(11, 4))
     for method in METHODS:
         mine = [r for r in rows if r["method"] == method]
@@ -70,13 +85,21 @@ def run(args) -> dict:
     for count in counts:
         error = {r["method"]: r["kg_error"] for r in rows if r["coefficients"] == count}
         ordering.append(bool(error["hamiltonian-opt"] <= error["hamiltonian"] <= error["mhb"]))
-    numbers = {"mesh": name, "n_vertices": n, "rows": rows, "ordering_holds_per_count": ordering,
-               "ordering_holds": all(ordering), "seconds": timer()}
+    numbers = {
+        "mesh": name,
+        "n_vertices": n,
+        "rows": rows,
+        "ordering_holds_per_count": ordering,
+        "ordering_holds": all(ordering),
+        "seconds": timer(),
+    }
     write_json(Path(args.output) / "fig8_compression.json", numbers)
     return numbers
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    print(f"fig8 ({r['mesh']}): error(H opt) <= error(H) <= error(MHB) at equal coefficients: "
-          f"{r['ordering_holds_per_count']} ({r['seconds']} s)")
+    print(
+        f"fig8 ({r['mesh']}): error(H opt) <= error(H) <= error(MHB) at equal coefficients: "
+        f"{r['ordering_holds_per_count']} ({r['seconds']} s)"
+    )

@@ -60,7 +60,16 @@ def test_bad_input_exits_2_with_one_line_and_no_output(tmp_path, mesh_file, case
     args = {
         "missing mesh": ["basis", str(tmp_path / "nope.off"), "-k", "3", "-o", str(out)],
         "garbage mesh": ["info", str(tmp_path / "garbage.off")],
-        "short potential": ["basis", str(mesh_file), "-k", "3", "--potential", str(tmp_path / "short.npy"), "-o", str(out)],
+        "short potential": [
+            "basis",
+            str(mesh_file),
+            "-k",
+            "3",
+            "--potential",
+            str(tmp_path / "short.npy"),
+            "-o",
+            str(out),
+        ],
         "nan potential": ["basis", str(mesh_file), "-k", "3", "--potential", str(tmp_path / "nan.npy"), "-o", str(out)],
         "k too large": ["basis", str(mesh_file), "-k", "100000", "-o", str(out)],
         "bad output": ["basis", str(mesh_file), "-k", "3", "-o", str(tmp_path / "out.txt")],

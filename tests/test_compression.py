@@ -5,6 +5,7 @@ import hamsa
 from hamsa import shapes
 from hamsa.cli import main
 from hamsa.compression import CompressionError, decode, encode, karni_gotsman_error, rms_error, sizes
+
 from conftest import data_mesh
 
 
@@ -84,13 +85,23 @@ def test_cli_compress_and_decompress(tmp_path, mesh, capsys):
 def test_fandisk_ordering_at_equal_coefficients():
     """T16: error(hamiltonian-opt) <= error(hamiltonian) <= error(mhb) at 100 coefficients, 12 bits."""
     fandisk = data_mesh("classic/fandisk.obj")
-    from hamsa.compression import combinatorial_laplacian
-    from hamsa.optimize import optimize_potential
     import scipy.sparse as sp
 
+    from hamsa.compression import combinatorial_laplacian
+    from hamsa.optimize import optimize_potential
+
     n = fandisk.n_vertices
-    V = optimize_potential((combinatorial_laplacian(fandisk.faces, n), sp.identity(n, format="csr")), fandisk.vertices,
-                           100, m=250, mass_weighted=False, max_iterations=60, rounds=6).potential
-    errors = {method: karni_gotsman_error(fandisk, decode(encode(fandisk, 100, 12, method, potential=V), fandisk.faces))
-              for method in ("mhb", "hamiltonian", "hamiltonian-opt")}
+    V = optimize_potential(
+        (combinatorial_laplacian(fandisk.faces, n), sp.identity(n, format="csr")),
+        fandisk.vertices,
+        100,
+        m=250,
+        mass_weighted=False,
+        max_iterations=60,
+        rounds=6,
+    ).potential
+    errors = {
+        method: karni_gotsman_error(fandisk, decode(encode(fandisk, 100, 12, method, potential=V), fandisk.faces))
+        for method in ("mhb", "hamiltonian", "hamiltonian-opt")
+    }
     assert errors["hamiltonian-opt"] <= errors["hamiltonian"] <= errors["mhb"]

@@ -13,6 +13,7 @@ from hamsa.diffusion import (
     total_heat,
     wave_kernel_signature,
 )
+
 from conftest import data_mesh
 
 

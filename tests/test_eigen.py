@@ -31,8 +31,8 @@ def solve(mesh, k, potential=None, **kwargs):
 
 def test_unit_sphere_spectrum_is_l_times_l_plus_one(sphere_5k):
     basis = solve(sphere_5k, 25, method="krylov")
-    l = np.arange(5)
-    expected = np.repeat(l * (l + 1), 2 * l + 1).astype(float)
+    degree = np.arange(5)
+    expected = np.repeat(degree * (degree + 1), 2 * degree + 1).astype(float)
     assert abs(basis.values[0]) < 1e-8
     np.testing.assert_allclose(basis.values[1:], expected[1:], rtol=0.01)
 

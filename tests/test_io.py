@@ -6,6 +6,7 @@ import pytest
 
 import hamsa
 from hamsa import MeshError, shapes
+
 from conftest import DATA
 
 
@@ -65,9 +66,13 @@ def test_ascii_stl_and_ascii_ply_and_obj_variants(tmp_path):
         ("quad.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n", "triangle mesh"),
         ("nan.off", b"OFF\n3 1 0\n0 0 nan\n1 0 0\n0 1 0\n3 0 1 2\n", "non-finite"),
         ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "references vertex 8"),
-        ("trunc.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\n"
-         b"property double y\nproperty double z\nelement face 1\nproperty list uchar int vertex_indices\n"
-         b"end_header\n\x00\x00", "truncated"),
+        (
+            "trunc.ply",
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\n"
+            b"property double y\nproperty double z\nelement face 1\nproperty list uchar int vertex_indices\n"
+            b"end_header\n\x00\x00",
+            "truncated",
+        ),
         ("garbage.stl", b"\x07" * 30, "STL"),
         ("bad.off.gz", b"not gzip at all", "cannot read"),
         ("mesh.xyz", b"1 2 3", "cannot tell the mesh format"),

@@ -5,6 +5,7 @@ import scipy.sparse as sp
 import hamsa
 from hamsa import PotentialError, shapes
 from hamsa.operators import hamiltonian, mass_matrix, potential_mass_matrix, stiffness_matrix, vertex_areas
+
 from conftest import data_mesh
 
 igl = pytest.importorskip("igl", reason="libigl is the test oracle: pip install 'hamsa[test]'")
@@ -56,7 +57,9 @@ def test_operators_equal_libigl_on_builtin_shapes(name):
 
 
 @pytest.mark.data
-@pytest.mark.parametrize("path", ["tosca_hires/meshes/cat0.off.gz", "scape/meshes/mesh000.off.gz", "classic/fandisk.obj"])
+@pytest.mark.parametrize(
+    "path", ["tosca_hires/meshes/cat0.off.gz", "scape/meshes/mesh000.off.gz", "classic/fandisk.obj"]
+)
 def test_operators_equal_libigl_on_real_meshes(path):
     _compare_with_libigl(data_mesh(path))
 
@@ -94,19 +97,25 @@ def test_full_potential_mass_matrix_integrates_exactly():
     V, f, g = rng.standard_normal((3, mesh.n_vertices))
     M = potential_mass_matrix(mesh, V, "full")
     assert abs(M - M.T).max() < 1e-15
-    bary = np.array([[0.816847572980459, 0.091576213509771, 0.091576213509771],
-                     [0.091576213509771, 0.816847572980459, 0.091576213509771],
-                     [0.091576213509771, 0.091576213509771, 0.816847572980459],
-                     [0.108103018168070, 0.445948490915965, 0.445948490915965],
-                     [0.445948490915965, 0.108103018168070, 0.445948490915965],
-                     [0.445948490915965, 0.445948490915965, 0.108103018168070]])
+    bary = np.array(
+        [
+            [0.816847572980459, 0.091576213509771, 0.091576213509771],
+            [0.091576213509771, 0.816847572980459, 0.091576213509771],
+            [0.091576213509771, 0.091576213509771, 0.816847572980459],
+            [0.108103018168070, 0.445948490915965, 0.445948490915965],
+            [0.445948490915965, 0.108103018168070, 0.445948490915965],
+            [0.445948490915965, 0.445948490915965, 0.108103018168070],
+        ]
+    )
     weights = np.array([0.109951743655322] * 3 + [0.223381589678011] * 3)
     values = [(x[mesh.faces] @ bary.T) for x in (V, f, g)]  # (m, 6) each
     integral = np.sum(mesh.face_areas[:, None] * weights * values[0] * values[1] * values[2])
     assert f @ M @ g == pytest.approx(integral, rel=1e-12)
 
 
-@pytest.mark.parametrize("bad, message", [(np.ones(5), "shape"), (np.full(300, np.nan), "non-finite"), ("x", "numeric")])
+@pytest.mark.parametrize(
+    "bad, message", [(np.ones(5), "shape"), (np.full(300, np.nan), "non-finite"), ("x", "numeric")]
+)
 def test_potential_errors(bad, message):
     with pytest.raises(PotentialError, match=message):
         hamiltonian(_perturbed(), bad)

@@ -8,6 +8,7 @@ from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
 from hamsa.operators import hamiltonian
 from hamsa.optimize import ReducedRepresentationProblem, optimize_potential
+
 from conftest import data_mesh
 
 

@@ -5,6 +5,7 @@ import hamsa
 from hamsa import shapes
 from hamsa.operators import hamiltonian
 from hamsa.theory import critical_potential_scale, eigenvalue_bounds, mass_fraction
+
 from conftest import data_mesh
 
 

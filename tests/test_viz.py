@@ -11,8 +11,15 @@ def test_render_fields_writes_a_non_blank_png(tmp_path):
 
     mesh = shapes.capsule(n_around=24)
     path = tmp_path / "fields.png"
-    image = viz.render_fields(mesh, [mesh.vertices[:, 2], mesh.vertices[:, 0]], path, titles=["z", "x"],
-                              cmap="RdBu_r", symmetric=True, view="xz")
+    image = viz.render_fields(
+        mesh,
+        [mesh.vertices[:, 2], mesh.vertices[:, 0]],
+        path,
+        titles=["z", "x"],
+        cmap="RdBu_r",
+        symmetric=True,
+        view="xz",
+    )
     assert path.exists() and image.shape == (320, 640, 3)
     # not blank: many distinct colors, and the two panels differ
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 50

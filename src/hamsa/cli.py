@@ -49,11 +49,15 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
     basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
 
-    optimize = commands.add_parser("optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)")
+    optimize = commands.add_parser(
+        "optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)"
+    )
     optimize.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
     optimize.add_argument("-k", type=_positive_int, required=True, help="number of eigenvectors")
     optimize.add_argument("--data", help="(n,) or (n, d) .npy to represent (default: the vertex coordinates)")
-    optimize.add_argument("-m", type=_positive_int, help="LBO eigenvectors of the reduced problem (default max(4k, k+100))")
+    optimize.add_argument(
+        "-m", type=_positive_int, help="LBO eigenvectors of the reduced problem (default max(4k, k+100))"
+    )
     optimize.add_argument("--iterations", type=_positive_int, default=100, help="L-BFGS iterations (default 100)")
     optimize.add_argument("--square", action="store_true", help="optimize V = v^2 >= 0 instead of a signed V")
     optimize.add_argument("-o", "--output", required=True, help="output .npy with the potential")
@@ -67,7 +71,9 @@ def _parser() -> argparse.ArgumentParser:
 
     decompress = commands.add_parser("decompress", help="rebuild a mesh from an .hmz file and the connectivity")
     decompress.add_argument("compressed", help="the .hmz file")
-    decompress.add_argument("--faces", required=True, help="a mesh file with the connectivity (its coordinates are ignored)")
+    decompress.add_argument(
+        "--faces", required=True, help="a mesh file with the connectivity (its coordinates are ignored)"
+    )
     decompress.add_argument("-o", "--output", required=True, help="output mesh file")
 
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
@@ -92,6 +98,16 @@ def _load_potential(path: str, n: int) -> np.ndarray:
         raise PotentialError(f"'{path}': {exc}") from None
 
 
+def _output_path(path: str, suffix: str | None = None) -> Path:
+    """Check an output path before any work is done: its suffix and that its folder exists."""
+    output = Path(path)
+    if suffix and output.suffix != suffix:
+        raise HamsaError(f"output '{output}' must end in {suffix}")
+    if not (output.parent if str(output.parent) else Path(".")).is_dir():
+        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    return output
+
+
 def _info(args) -> None:
     from hamsa.io import load_mesh
 
@@ -105,14 +121,22 @@ def _info(args) -> None:
     print(f"bounding box    diagonal {mesh.bounding_box_diagonal:.6g}")
     print(f"mean edge       {mesh.mean_edge_length:.6g}")
     print(f"components      {mesh.n_components}")
-    print(f"boundary loops  {len(loops)}" + (f" (lengths {', '.join(str(len(x)) for x in loops[:8])}"
-                                            f"{', ...' if len(loops) > 8 else ''})" if loops else ""))
+    print(
+        f"boundary loops  {len(loops)}"
+        + (
+            f" (lengths {', '.join(str(len(x)) for x in loops[:8])}{', ...' if len(loops) > 8 else ''})"
+            if loops
+            else ""
+        )
+    )
     chi = mesh.euler_characteristic
     genus = f", genus {(2 - chi) // 2}" if mesh.n_components == 1 and not loops and chi % 2 == 0 else ""
     print(f"Euler char.     {chi}{genus}")
     defects = []
     if len(mesh.unreferenced_vertices):
-        defects.append(f"{len(mesh.unreferenced_vertices)} unreferenced vertices (drop with mesh.without_unreferenced())")
+        defects.append(
+            f"{len(mesh.unreferenced_vertices)} unreferenced vertices (drop with mesh.without_unreferenced())"
+        )
     if len(mesh.non_manifold_vertices):
         defects.append(f"{len(mesh.non_manifold_vertices)} non-manifold vertices")
     if not mesh.is_consistently_oriented:
@@ -124,11 +148,7 @@ def _basis(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.io import load_mesh
 
-    output = Path(args.output)
-    if output.suffix != ".npz":
-        raise HamsaError(f"output '{output}' must end in .npz")
-    if not (output.parent if str(output.parent) else Path(".")).is_dir():
-        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    output = _output_path(args.output, ".npz")
     start = time.perf_counter()
     mesh = load_mesh(args.mesh)
     loaded = time.perf_counter()
@@ -140,8 +160,10 @@ def _basis(args) -> None:
     kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
     print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")
     print(f"eigenvalues     {basis.values[0]:.6g} .. {basis.values[-1]:.6g}")
-    print(f"solver          {basis.info.method}, {basis.info.solves} solves, {basis.info.cycles} cycles, "
-          f"max relative residual {basis.info.max_residual:.1e}")
+    print(
+        f"solver          {basis.info.method}, {basis.info.solves} solves, {basis.info.cycles} cycles, "
+        f"max relative residual {basis.info.max_residual:.1e}"
+    )
     print(f"time            load {loaded - start:.2f} s, solve {solved - loaded:.2f} s, save {done - solved:.2f} s")
     print(f"wrote           {output}")
 
@@ -150,11 +172,7 @@ def _optimize(args) -> None:
     from hamsa.io import atomic_write, load_mesh
     from hamsa.optimize import optimize_potential
 
-    output = Path(args.output)
-    if output.suffix != ".npy":
-        raise HamsaError(f"output '{output}' must end in .npy")
-    if not (output.parent if str(output.parent) else Path(".")).is_dir():
-        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    output = _output_path(args.output, ".npy")
     mesh = load_mesh(args.mesh)
     if args.data:
         try:
@@ -164,14 +182,25 @@ def _optimize(args) -> None:
     else:
         data = mesh.vertices
     start = time.perf_counter()
-    result = optimize_potential(mesh, data, args.k, m=args.m, parametrization="square" if args.square else "signed",
-                                max_iterations=args.iterations, progress=sys.stderr.isatty())
+    result = optimize_potential(
+        mesh,
+        data,
+        args.k,
+        m=args.m,
+        parametrization="square" if args.square else "signed",
+        max_iterations=args.iterations,
+        progress=sys.stderr.isatty(),
+    )
     with atomic_write(output) as handle:
         np.save(handle, result.potential)
-    print(f"representation error with k = {args.k}: LBO {result.lbo_loss:.4g}, optimized Hamiltonian "
-          f"{result.loss:.4g} ({result.ratio:.2f}x smaller)")
-    print(f"potential in [{result.potential.min():.4g}, {result.potential.max():.4g}], "
-          f"{len(result.history) - 1} iterations, {time.perf_counter() - start:.1f} s")
+    print(
+        f"representation error with k = {args.k}: LBO {result.lbo_loss:.4g}, optimized Hamiltonian "
+        f"{result.loss:.4g} ({result.ratio:.2f}x smaller)"
+    )
+    print(
+        f"potential in [{result.potential.min():.4g}, {result.potential.max():.4g}], "
+        f"{len(result.history) - 1} iterations, {time.perf_counter() - start:.1f} s"
+    )
     print(f"wrote           {output}")
 
 
@@ -179,6 +208,7 @@ def _compress(args) -> None:
     from hamsa import compression
     from hamsa.io import atomic_write, load_mesh
 
+    _output_path(args.output)
     mesh = load_mesh(args.mesh)
     start = time.perf_counter()
     data = compression.encode(mesh, args.coeffs, args.bits, args.method)
@@ -186,11 +216,19 @@ def _compress(args) -> None:
         handle.write(data)
     size = compression.sizes(data)
     decoded = compression.decode(data, mesh.faces)
-    print(f"{args.method}: {args.coeffs} coefficients x 3 at {args.bits} bits -> {len(data)} bytes, "
-          f"{size.bits_per_vertex:.2f} bits/vertex (payload)"
-          + (f", vertex order {size.permutation_bits / mesh.n_vertices:.2f} bits/vertex" if size.permutation_bits > 64 else ""))
-    print(f"Karni-Gotsman error {compression.karni_gotsman_error(mesh, decoded):.4g}, RMS / bbox diagonal "
-          f"{compression.rms_error(mesh, decoded):.4g}; {time.perf_counter() - start:.1f} s")
+    print(
+        f"{args.method}: {args.coeffs} coefficients x 3 at {args.bits} bits -> {len(data)} bytes, "
+        f"{size.bits_per_vertex:.2f} bits/vertex (payload)"
+        + (
+            f", vertex order {size.permutation_bits / mesh.n_vertices:.2f} bits/vertex"
+            if size.permutation_bits > 64
+            else ""
+        )
+    )
+    print(
+        f"Karni-Gotsman error {compression.karni_gotsman_error(mesh, decoded):.4g}, RMS / bbox diagonal "
+        f"{compression.rms_error(mesh, decoded):.4g}; {time.perf_counter() - start:.1f} s"
+    )
     print(f"wrote           {args.output}")
 
 
@@ -217,8 +255,10 @@ def _demo(args) -> None:
     mesh = result.mesh
     print("hamsa demo: a finite step potential on a built-in capsule (paper section 2.3, Fig. 2 in numbers)")
     print(f"mesh: capsule, {mesh.n_vertices} vertices, {mesh.n_faces} faces, area {mesh.area:.4f}")
-    print(f"potential: V = {result.height:.4f} on the upper part (z > 0.3), 0 elsewhere "
-          f"(the V = 0 region holds {100 * result.region_fraction:.1f}% of the area)")
+    print(
+        f"potential: V = {result.height:.4f} on the upper part (z > 0.3), 0 elsewhere "
+        f"(the V = 0 region holds {100 * result.region_fraction:.1f}% of the area)"
+    )
     print()
     print(result.table())
     print()
@@ -226,14 +266,22 @@ def _demo(args) -> None:
     print("lambda_i + min V <= E_i <= lambda_i + max V. The last columns give each eigenfunction's share of")
     print("A-mass inside the V = 0 region: modes with E_i below the step stay trapped there; above it they leak.")
     trapped = result.inside[result.values < result.height]
-    print(f"modes below the step: {len(trapped)}, mean mass inside {100 * trapped.mean():.1f}%; "
-          f"time {result.seconds:.2f} s")
+    print(
+        f"modes below the step: {len(trapped)}, mean mass inside {100 * trapped.mean():.1f}%; "
+        f"time {result.seconds:.2f} s"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    handlers = {"info": _info, "basis": _basis, "optimize": _optimize, "compress": _compress,
-                "decompress": _decompress, "demo": _demo}
+    handlers = {
+        "info": _info,
+        "basis": _basis,
+        "optimize": _optimize,
+        "compress": _compress,
+        "decompress": _decompress,
+        "demo": _demo,
+    }
     try:
         handlers[args.command](args)
     except HamsaError as exc:

@@ -113,8 +113,9 @@ def _dequantize(q: np.ndarray, low: np.ndarray, span: np.ndarray, bits: int) -> 
     return low + q.astype(np.float64) * span / ((1 << bits) - 1)
 
 
-def encode(mesh, n_coeffs: int, bits: int = 12, method: str = "mhb", *, potential=None,
-           optimize_iterations: int = 60) -> bytes:
+def encode(
+    mesh, n_coeffs: int, bits: int = 12, method: str = "mhb", *, potential=None, optimize_iterations: int = 60
+) -> bytes:
     """Compress the vertex coordinates of ``mesh`` to bytes.
 
     Parameters
@@ -145,9 +146,15 @@ def encode(mesh, n_coeffs: int, bits: int = 12, method: str = "mhb", *, potentia
         if potential is None:
             from hamsa.optimize import optimize_potential
 
-            potential = optimize_potential((L, sp.identity(n, format="csr")), X, n_coeffs, mass_weighted=False,
-                                           m=min(n, 2 * n_coeffs + 50), max_iterations=optimize_iterations,
-                                           rounds=max(1, optimize_iterations // 10)).potential
+            potential = optimize_potential(
+                (L, sp.identity(n, format="csr")),
+                X,
+                n_coeffs,
+                mass_weighted=False,
+                m=min(n, 2 * n_coeffs + 50),
+                max_iterations=optimize_iterations,
+                rounds=max(1, optimize_iterations // 10),
+            ).potential
         potential = np.asarray(potential, dtype=np.float64)
         if potential.shape != (n,):
             raise HamsaError(f"potential has shape {potential.shape}, expected ({n},)")
@@ -199,7 +206,9 @@ def decode(data: bytes, faces) -> np.ndarray:
         low = np.frombuffer(header, "<f8", 3, _HEADER.size)
         span = np.frombuffer(header, "<f8", 3, _HEADER.size + 24)
         q = np.frombuffer(lzma.decompress(coefficient_bytes), "<u4").reshape(n_coeffs, 3)
-        order = np.cumsum(np.frombuffer(lzma.decompress(permutation_bytes), "<i4")) if permutation_bytes else np.arange(n)
+        order = (
+            np.cumsum(np.frombuffer(lzma.decompress(permutation_bytes), "<i4")) if permutation_bytes else np.arange(n)
+        )
         potential = np.frombuffer(lzma.decompress(potential_bytes), "<f8") if potential_bytes else None
     except (struct.error, ValueError, lzma.LZMAError) as exc:
         raise CompressionError(f"file is corrupted: {exc}") from None
@@ -229,8 +238,9 @@ def geometric_laplacian(mesh: TriMesh, vertices: np.ndarray) -> np.ndarray:
     e = mesh.edges
     w = 1.0 / mesh.edge_lengths
     n = mesh.n_vertices
-    weights = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]),
-                                                     np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)).tocsr()
+    weights = sp.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)
+    ).tocsr()
     return vertices - (weights @ vertices) / np.asarray(weights.sum(axis=1))
 
 
@@ -238,8 +248,9 @@ def karni_gotsman_error(mesh: TriMesh, decoded: np.ndarray) -> float:
     """``(1/2n) (sum_i |v_i - v'_i| + sum_i |GL(v_i) - GL(v'_i)|)`` (Karni & Gotsman 2000's visual metric)."""
     original = mesh.vertices
     gl = geometric_laplacian(mesh, original) - geometric_laplacian(mesh, decoded)
-    return float((np.linalg.norm(original - decoded, axis=1).sum() + np.linalg.norm(gl, axis=1).sum())
-                 / (2 * mesh.n_vertices))
+    return float(
+        (np.linalg.norm(original - decoded, axis=1).sum() + np.linalg.norm(gl, axis=1).sum()) / (2 * mesh.n_vertices)
+    )
 
 
 def rms_error(mesh: TriMesh, decoded: np.ndarray) -> float:

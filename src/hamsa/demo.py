@@ -41,11 +41,14 @@ class StepPotentialDemo:
             f"{'phi in V=0':>11} {'psi in V=0':>11}"
         ]
         for i in range(len(self.values)):
-            holds = self.lower_bounds[i] - 1e-9 * abs(self.upper_bounds[i]) <= self.values[i] <= (
-                self.upper_bounds[i] + 1e-9 * abs(self.upper_bounds[i])
+            holds = (
+                self.lower_bounds[i] - 1e-9 * abs(self.upper_bounds[i])
+                <= self.values[i]
+                <= (self.upper_bounds[i] + 1e-9 * abs(self.upper_bounds[i]))
             )
+            lbo_value, lower = (0.0 if abs(x) < 1e-9 else x for x in (self.lbo_values[i], self.lower_bounds[i]))
             lines.append(
-                f"{i + 1:>3} {abs(self.lbo_values[i]) if abs(self.lbo_values[i]) < 1e-9 else self.lbo_values[i]:>10.4f} {self.values[i]:>10.4f} {self.lower_bounds[i]:>10.4f} "
+                f"{i + 1:>3} {lbo_value:>10.4f} {self.values[i]:>10.4f} {lower:>10.4f} "
                 f"{self.upper_bounds[i]:>10.4f} {'ok' if holds else 'FAIL':>5} "
                 f"{100 * self.lbo_inside[i]:>10.1f}% {100 * self.inside[i]:>10.1f}%"
             )

@@ -219,7 +219,14 @@ def eigenbasis(
     H, A = hamiltonian(mesh, potential, mass)
     lower = float(potential.min()) if potential is not None else 0.0
     values, vectors, info = generalized_eigsh(
-        H, A, k, lower_bound=lower, method=method, tol=tol, backend=backend, initial=initial,
+        H,
+        A,
+        k,
+        lower_bound=lower,
+        method=method,
+        tol=tol,
+        backend=backend,
+        initial=initial,
         spectral_scale=4 * np.pi / mesh.area,
     )
     return Eigenbasis(values, vectors, A, potential, mass, info)
@@ -290,8 +297,10 @@ def generalized_eigsh(
             H, A, k, shift=shift, tol=tol, backend=backend, initial=initial, factor=factor, max_cycles=max_cycles
         )
     fix_signs(vectors)
-    return values, vectors, SolveInfo(
-        info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start, info.shift
+    return (
+        values,
+        vectors,
+        SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start, info.shift),
     )
 
 

@@ -5,8 +5,8 @@
 3. Recover the distance from ``W phi = -div X`` (our W is PSD, so the sign flips from the paper's L).
 Accuracy: with the default ``t = h^2`` (h the mean edge length) the error is first order in h; on a
 unit sphere the mean relative error against great-circle distances measured 1.9% at 2k vertices and
-1.5% at 10k, the largest (about 6% at 10k) near the source's cut locus (``tests/test_geodesic.py``). Boundaries get the Neumann solution only. Vertices in
-connected components without a source get ``inf``.
+1.5% at 10k, the largest (about 6% at 10k) near the source's cut locus (``tests/test_potentials.py``).
+Boundaries get the Neumann solution only. Vertices in connected components without a source get ``inf``.
 """
 
 from __future__ import annotations
@@ -58,7 +58,9 @@ class GeodesicSolver:
         self._heat = CholeskySolver((self._mass + self.t * W).tocsc())
         # W is singular (constants); a tiny mass shift makes it definite without moving the solution,
         # since the divergence sums to zero on every component.
-        self._poisson = CholeskySolver((W + 1e-10 * W.diagonal().mean() / self._mass.diagonal().mean() * self._mass).tocsc())
+        self._poisson = CholeskySolver(
+            (W + 1e-10 * W.diagonal().mean() / self._mass.diagonal().mean() * self._mass).tocsc()
+        )
         self._components = self.mesh.vertex_components[1]
         self._corners = [self.mesh.vertices[self.mesh.faces[:, c]] for c in range(3)]
 

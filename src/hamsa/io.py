@@ -163,9 +163,7 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if n < 0 or m < 0:
         raise MeshError(f"OFF header has negative counts ({n}, {m})")
     if len(body) < n + m:
-        raise MeshError(
-            f"OFF header promises {n} vertices and {m} faces, the file has only {len(body)} data lines"
-        )
+        raise MeshError(f"OFF header promises {n} vertices and {m} faces, the file has only {len(body)} data lines")
     vertices = _fixed_width(body[:n], 3, "vertex")
     face_lines = body[n : n + m]
     faces = _off_faces(face_lines)
@@ -215,10 +213,22 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
 
 # ------------------------------------------------------------------------------------- PLY
 _PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 
 

@@ -310,15 +310,11 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError(f"face {bad[0]} has a negative vertex index {faces[bad[0]].tolist()}")
     bad = np.flatnonzero(high >= n)
     if len(bad):
-        raise MeshError(
-            f"face {bad[0]} references vertex {int(high[bad[0]])}, mesh has {n} vertices"
-        )
+        raise MeshError(f"face {bad[0]} references vertex {int(high[bad[0]])}, mesh has {n} vertices")
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     bad = np.flatnonzero(repeated)
     if len(bad):
-        raise MeshError(
-            f"{len(bad)} faces repeat a vertex (first: face {bad[0]} = {faces[bad[0]].tolist()})"
-        )
+        raise MeshError(f"{len(bad)} faces repeat a vertex (first: face {bad[0]} = {faces[bad[0]].tolist()})")
     areas = _face_areas(vertices, faces)
     v = vertices
     longest = np.max(
@@ -360,9 +356,7 @@ def _boundary_loops(boundary_edges: np.ndarray) -> list[np.ndarray]:
             loop = [start]
             current = start
             while True:
-                nxt = next(
-                    (x for x in neighbours[current] if (min(current, x), max(current, x)) in unused), None
-                )
+                nxt = next((x for x in neighbours[current] if (min(current, x), max(current, x)) in unused), None)
                 if nxt is None:
                     break
                 unused.discard((min(current, nxt), max(current, nxt)))

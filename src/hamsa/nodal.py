@@ -82,8 +82,15 @@ def courant_check(mesh, basis: Eigenbasis, count: int | None = None, zero_tol: f
     for i in range(count):
         domains, _ = nodal_domains(mesh, basis.vectors[:, i], zero_tol)
         bound = last_index[clusters[i]]
-        rows.append({"index": i + 1, "value": float(basis.values[i]), "domains": domains, "bound": bound,
-                     "holds": domains <= bound})
+        rows.append(
+            {
+                "index": i + 1,
+                "value": float(basis.values[i]),
+                "domains": domains,
+                "bound": bound,
+                "holds": domains <= bound,
+            }
+        )
     return rows
 
 
@@ -103,8 +110,12 @@ def segment(mesh, basis: Eigenbasis, index: int, min_vertices: int = 1) -> np.nd
     while np.any(labels < 0):
         a, b = labels[e[:, 0]], labels[e[:, 1]]
         # an unlabelled endpoint takes the label of its labelled neighbour (majority by edge count)
-        pairs = np.concatenate([np.stack([e[(a < 0) & (b >= 0), 0], b[(a < 0) & (b >= 0)]], 1),
-                                np.stack([e[(b < 0) & (a >= 0), 1], a[(b < 0) & (a >= 0)]], 1)])
+        pairs = np.concatenate(
+            [
+                np.stack([e[(a < 0) & (b >= 0), 0], b[(a < 0) & (b >= 0)]], 1),
+                np.stack([e[(b < 0) & (a >= 0), 1], a[(b < 0) & (a >= 0)]], 1),
+            ]
+        )
         if len(pairs) == 0:  # a component without any labelled vertex
             labels[labels < 0] = labels.max() + 1
             break

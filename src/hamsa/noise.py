@@ -41,7 +41,9 @@ def potential_noise(potential, fraction: float = 0.2, seed: int = 0) -> np.ndarr
     return v + np.sqrt(fraction * v.var()) * rng.standard_normal(v.shape)
 
 
-def topological_noise(mesh, area_fraction: float = 0.3, hole_radius: float = 3.0, seed: int = 0) -> tuple[TriMesh, np.ndarray]:
+def topological_noise(
+    mesh, area_fraction: float = 0.3, hole_radius: float = 3.0, seed: int = 0
+) -> tuple[TriMesh, np.ndarray]:
     """Cut small holes until ``area_fraction`` of the surface area is removed.
 
     Parameters

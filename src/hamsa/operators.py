@@ -88,8 +88,10 @@ def vertex_areas(mesh, kind: str = "voronoi") -> np.ndarray:
         corner_area = np.repeat(area[:, None] / 3.0, 3, axis=1)
     elif kind == "voronoi":
         voronoi = np.stack(
-            [(sq_len[:, (c + 1) % 3] * cot[:, (c + 1) % 3] + sq_len[:, (c + 2) % 3] * cot[:, (c + 2) % 3]) / 8.0
-             for c in range(3)],
+            [
+                (sq_len[:, (c + 1) % 3] * cot[:, (c + 1) % 3] + sq_len[:, (c + 2) % 3] * cot[:, (c + 2) % 3]) / 8.0
+                for c in range(3)
+            ],
             axis=1,
         )
         obtuse_corner = cot < 0

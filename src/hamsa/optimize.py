@@ -176,8 +176,12 @@ class _Progress:
             self.bar.update(1)
             self.bar.set_postfix(loss=f"{loss:.3e}", grad=f"{gradient_norm:.1e}")
         else:
-            print(f"\r  iteration {iteration}/{self.total}  loss {loss:.4e}  |grad| {gradient_norm:.2e}",
-                  end="", file=sys.stderr, flush=True)
+            print(
+                f"\r  iteration {iteration}/{self.total}  loss {loss:.4e}  |grad| {gradient_norm:.2e}",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
 
     def close(self) -> None:
         if self.bar is not None:
@@ -249,16 +253,23 @@ def optimize_potential(
     def record(x):
         # L-BFGS calls back with the iterate it last evaluated: reuse that evaluation
         loss, gradient = (last["loss"], last["gradient"]) if np.array_equal(last.get("x"), x) else objective(x)
-        history.append({"iteration": len(history), "loss": loss, "gradient_norm": float(np.linalg.norm(gradient)),
-                        "seconds": time.perf_counter() - start})
+        history.append(
+            {
+                "iteration": len(history),
+                "loss": loss,
+                "gradient_norm": float(np.linalg.norm(gradient)),
+                "seconds": time.perf_counter() - start,
+            }
+        )
         bar.update(len(history), loss, history[-1]["gradient_norm"])
 
     def subspace(V):
         """m eigenvectors of H(V): the reduced problem is accurate near V. A loose tolerance suffices
         (the stiffness is projected exactly onto whatever basis we get)."""
         method = "dense" if m >= n - 1 or n <= 1500 else "auto"
-        _, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, m, tol=1e-5, lower_bound=float(V.min()),
-                                          method=method)
+        _, vectors, _ = generalized_eigsh(
+            W + A @ sp.diags(V), A, m, tol=1e-5, lower_bound=float(V.min()), method=method
+        )
         return ReducedRepresentationProblem(vectors.T @ (W @ vectors), vectors, a, X, k, epsilon)
 
     x = np.zeros(n) if parametrization == "signed" else np.full(n, 1e-3)
@@ -266,13 +277,20 @@ def optimize_potential(
     problem = subspace(to_V(x))
     lbo_loss = problem.loss(np.zeros(n)) if parametrization == "signed" else None
     current = problem.loss(to_V(x))
-    history.append({"iteration": 0, "loss": current, "gradient_norm": float(np.linalg.norm(objective(x)[1])),
-                    "seconds": 0.0})
+    history.append(
+        {"iteration": 0, "loss": current, "gradient_norm": float(np.linalg.norm(objective(x)[1])), "seconds": 0.0}
+    )
     per_round = max(1, max_iterations // rounds)
     try:
         for _ in range(rounds):
-            result = sopt.minimize(objective, x, jac=True, method="L-BFGS-B", callback=record,
-                                   options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20})
+            result = sopt.minimize(
+                objective,
+                x,
+                jac=True,
+                method="L-BFGS-B",
+                callback=record,
+                options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20},
+            )
             # Trust the reduced model only where it is accurate: re-center the subspace at the new V and
             # accept the step only if the loss there (the true one, up to the loose basis) decreased;
             # otherwise halve the step, up to four times.

@@ -140,7 +140,9 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
     mesh.require_operator_ready()
     areas = vertex_areas(mesh)
     if kind in ("mean", "absolute_mean"):
-        laplacian = stiffness_matrix(mesh) @ mesh.vertices  # = -(cotan Laplacian) X = 2 a H n (inward-pointing for convex)
+        laplacian = (
+            stiffness_matrix(mesh) @ mesh.vertices
+        )  # = -(cotan Laplacian) X = 2 a H n (inward-pointing for convex)
         value = np.linalg.norm(laplacian, axis=1) / (2 * areas)
         if kind == "absolute_mean":
             return value

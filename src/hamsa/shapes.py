@@ -19,13 +19,46 @@ def icosphere(subdivisions: int = 3, radius: float = 1.0) -> TriMesh:
         raise ValueError("subdivisions must be >= 0")
     t = (1.0 + 5.0**0.5) / 2.0
     v = np.array(
-        [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=float
+        [
+            [-1, t, 0],
+            [1, t, 0],
+            [-1, -t, 0],
+            [1, -t, 0],
+            [0, -1, t],
+            [0, 1, t],
+            [0, -1, -t],
+            [0, 1, -t],
+            [t, 0, -1],
+            [t, 0, 1],
+            [-t, 0, -1],
+            [-t, 0, 1],
+        ],
+        dtype=float,
     )
     f = np.array(
-        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-         [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-         [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], dtype=np.int64
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ],
+        dtype=np.int64,
     )
     for _ in range(subdivisions):
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -94,7 +127,8 @@ def _normal_z(vertices: np.ndarray, face: np.ndarray) -> float:
 def torus(major_radius: float = 1.0, minor_radius: float = 0.35, n_major: int = 64, n_minor: int = 24) -> TriMesh:
     """A torus around the z axis with n_major x n_minor vertices."""
     u, w = np.meshgrid(
-        np.linspace(0, 2 * np.pi, n_major, endpoint=False), np.linspace(0, 2 * np.pi, n_minor, endpoint=False),
+        np.linspace(0, 2 * np.pi, n_major, endpoint=False),
+        np.linspace(0, 2 * np.pi, n_minor, endpoint=False),
         indexing="ij",
     )
     ring = major_radius + minor_radius * np.cos(w)
@@ -116,8 +150,12 @@ def surface_of_revolution(profile_r: np.ndarray, profile_z: np.ndarray, n_around
     angle = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
     rings = len(r) - 2
     ring_v = np.stack(
-        [np.outer(r[1:-1], np.cos(angle)).ravel(), np.outer(r[1:-1], np.sin(angle)).ravel(),
-         np.repeat(z[1:-1], n_around)], axis=1
+        [
+            np.outer(r[1:-1], np.cos(angle)).ravel(),
+            np.outer(r[1:-1], np.sin(angle)).ravel(),
+            np.repeat(z[1:-1], n_around),
+        ],
+        axis=1,
     )
     vertices = np.vstack([[0, 0, z[0]], ring_v, [0, 0, z[-1]]])
     body = _grid_faces(rings, n_around, wrap_cols=True) + 1
@@ -146,8 +184,9 @@ def _orient_about_axis(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def uv_sphere(n_latitude: int = 32, n_longitude: int = 64, radius: float = 1.0) -> TriMesh:
     """Latitude-longitude sphere (poles are high-valence vertices; use :func:`sphere` for uniform sampling)."""
     theta = np.linspace(0, np.pi, n_latitude + 1)
-    return surface_of_revolution(radius * np.sin(theta) * (np.arange(n_latitude + 1) % n_latitude != 0),
-                                 -radius * np.cos(theta), n_longitude)
+    return surface_of_revolution(
+        radius * np.sin(theta) * (np.arange(n_latitude + 1) % n_latitude != 0), -radius * np.cos(theta), n_longitude
+    )
 
 
 def capsule(radius: float = 0.5, length: float = 2.0, n_around: int = 48, n_along: int | None = None) -> TriMesh:
@@ -160,9 +199,13 @@ def capsule(radius: float = 0.5, length: float = 2.0, n_around: int = 48, n_alon
     count = n_along or max(4, int(round(arc / spacing)))
     s = np.linspace(0, arc, count + 1)
     cap = np.pi * radius / 2
-    r = np.where(s < cap, radius * np.sin(s / radius),
-                 np.where(s > cap + length, radius * np.sin((arc - s) / radius), radius))
-    z = np.where(s < cap, -length / 2 - radius * np.cos(s / radius),
-                 np.where(s > cap + length, length / 2 + radius * np.cos((arc - s) / radius), s - cap - length / 2))
+    r = np.where(
+        s < cap, radius * np.sin(s / radius), np.where(s > cap + length, radius * np.sin((arc - s) / radius), radius)
+    )
+    z = np.where(
+        s < cap,
+        -length / 2 - radius * np.cos(s / radius),
+        np.where(s > cap + length, length / 2 + radius * np.cos((arc - s) / radius), s - cap - length / 2),
+    )
     r[0] = r[-1] = 0.0
     return surface_of_revolution(r, z, n_around)

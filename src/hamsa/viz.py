@@ -68,7 +68,8 @@ def render_fields(
         Panels per row (default: all in one row up to 5).
     panel_size : (width, height) in pixels
     view : "auto" (default: look along the shape's thinnest principal axis with +z up, which shows a
-        standing or T-posed body from the front and an animal from the side), "xy", "xz", "yz", "yx", "zx", "zy", "iso", or
+        standing or T-posed body from the front and an animal from the side), "xy", "xz", "yz", "yx", "zx",
+        "zy", "iso", or
         a pair (direction, up) of 3-vectors: the camera looks from ``center + direction``
     zoom : float
 
@@ -88,8 +89,12 @@ def render_fields(
     titles = [f"field {i}" for i in range(len(fields))] if titles is None else list(titles)
     columns = columns or min(len(fields), 5)
     rows = -(-len(fields) // columns)
-    plotter = pv.Plotter(off_screen=True, shape=(rows, columns), window_size=(panel_size[0] * columns, panel_size[1] * rows),
-                         border=False)
+    plotter = pv.Plotter(
+        off_screen=True,
+        shape=(rows, columns),
+        window_size=(panel_size[0] * columns, panel_size[1] * rows),
+        border=False,
+    )
     overall = max(np.nanmax(np.abs(f)) for f in fields)
     low_all, high_all = min(np.nanmin(f) for f in fields), max(np.nanmax(f) for f in fields)
     for index, (mesh_i, field, title) in enumerate(zip(meshes, fields, titles)):
@@ -106,9 +111,21 @@ def render_fields(
         poly.point_data["value"] = field
         plotter.subplot(index // columns, index % columns)
         plotter.add_mesh(
-            poly, scalars="value", cmap=cmap, clim=clim, smooth_shading=True,
-            scalar_bar_args={"title": " " * index, "n_labels": 3, "fmt": "%.2g", "height": 0.08, "width": 0.6,
-                             "position_x": 0.2, "position_y": 0.02, "label_font_size": 11},
+            poly,
+            scalars="value",
+            cmap=cmap,
+            clim=clim,
+            smooth_shading=True,
+            scalar_bar_args={
+                "title": " " * index,
+                "n_labels": 3,
+                "fmt": "%.2g",
+                "height": 0.08,
+                "width": 0.6,
+                "position_x": 0.2,
+                "position_y": 0.02,
+                "label_font_size": 11,
+            },
         )
         plotter.add_text(title, position="upper_edge", font_size=9, color="black")
         plotter.set_background("white")
@@ -154,4 +171,6 @@ def _directed_view(plotter, points: np.ndarray, direction: np.ndarray, up: np.nd
 
 
 def _is_pair(value) -> bool:
-    return len(value) == 2 and isinstance(value[0], np.ndarray) and isinstance(value[1], np.ndarray) and value[1].ndim == 2
+    return (
+        len(value) == 2 and isinstance(value[0], np.ndarray) and isinstance(value[1], np.ndarray) and value[1].ndim == 2
+    )
