@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,29 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "data" in item.keywords:
             item.add_marker(skip)
+
+
+_RENDERING: list = []
+
+
+def require_rendering() -> None:
+    """Skip the calling test, with the reason, when pyvista cannot render off screen here."""
+    pytest.importorskip("pyvista", reason="rendering needs the [viz] extra: pip install 'hamsa[viz]'")
+    if not _RENDERING:
+        from hamsa import viz
+
+        try:
+            mesh = shapes.icosphere(1)
+            with tempfile.TemporaryDirectory() as folder:
+                viz.render_fields(mesh, [mesh.vertices[:, 0]], Path(folder) / "probe.png")
+            _RENDERING.append(None)
+        except Exception as exc:  # no EGL/OpenGL here: say why
+            _RENDERING.append(
+                f"off-screen rendering is unavailable ({type(exc).__name__}: {exc}); "
+                "install Debian's libegl1 libegl-mesa0 libgl1-mesa-dri"
+            )
+    if _RENDERING[0]:
+        pytest.skip(_RENDERING[0])
 
 
 def data_mesh(relative: str) -> hamsa.TriMesh:

@@ -9,8 +9,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-pytest.importorskip("pyvista", reason="the figures need the [viz] extra: pip install 'hamsa[viz]'")
+from conftest import require_rendering
+
 pytest.importorskip("matplotlib", reason="the figures need the [viz] extra: pip install 'hamsa[viz]'")
+
+
+@pytest.fixture(autouse=True)
+def _rendering():
+    require_rendering()
+
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
 

@@ -3,7 +3,12 @@ import pytest
 
 from hamsa import shapes
 
-pyvista = pytest.importorskip("pyvista", reason="rendering needs the [viz] extra: pip install 'hamsa[viz]'")
+from conftest import require_rendering
+
+
+@pytest.fixture(autouse=True)
+def _rendering():
+    require_rendering()
 
 
 def test_render_fields_writes_a_non_blank_png(tmp_path):

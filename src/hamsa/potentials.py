@@ -99,6 +99,11 @@ def area_distortion(mesh_a, mesh_b, correspondence=None) -> np.ndarray:
     c[i] of B; default the identity, for meshes that share vertex indexing).
     """
     a, b = as_trimesh(mesh_a), as_trimesh(mesh_b)
+    if correspondence is None and a.n_vertices != b.n_vertices:
+        raise PotentialError(
+            f"the meshes have {a.n_vertices} and {b.n_vertices} vertices: pass a correspondence (the identity "
+            "needs equal vertex counts)"
+        )
     c = np.arange(a.n_vertices) if correspondence is None else np.asarray(correspondence)
     if c.shape != (a.n_vertices,) or not np.issubdtype(c.dtype, np.integer):
         raise PotentialError(f"correspondence must be (n_a,) = ({a.n_vertices},) integer indices into mesh_b")
