@@ -32,12 +32,9 @@ def test_theorem_1_and_residual_bound_on_a_real_mesh(scape):
         assert error @ A @ error <= (f @ H @ f) / basis.values[n] * (1 + 1e-10)
 
 
-def test_mu_rule_first_order():
-    """T2: E_i(mu) = lambda_i + mu <phi_i, V phi_i> + O(mu^2), and mu = bound/2 keeps E_i > mu max V."""
-    mesh = shapes.capsule(radius=0.5, length=2.0, n_around=32)
+def _check_mu_rule(mesh, V):
     lbo = hamsa.eigenbasis(mesh, 6)
-    V = np.exp(-((mesh.vertices[:, 2] - 0.8) ** 2) / 0.1)  # a bump near one end, max 1
-    i = 1  # the first non-constant mode, simple on this capsule
+    i = 1  # the first non-constant mode (simple on these shapes)
     expectation = lbo.vectors[:, i] @ (lbo.mass @ (V * lbo.vectors[:, i]))
     errors = []
     for mu in (0.4, 0.2, 0.1):
@@ -47,6 +44,18 @@ def test_mu_rule_first_order():
     bound = critical_potential_scale(lbo, V, i)
     mu = 0.5 * bound
     assert hamsa.eigenbasis(mesh, 6, mu * V).values[i] > mu * V.max()
+
+
+def test_mu_rule_first_order():
+    """T2: E_i(mu) = lambda_i + mu <phi_i, V phi_i> + O(mu^2), and mu = bound/2 keeps E_i > mu max V."""
+    mesh = shapes.capsule(radius=0.5, length=2.0, n_around=32)
+    _check_mu_rule(mesh, np.exp(-((mesh.vertices[:, 2] - 0.8) ** 2) / 0.1))  # a bump near one end, max 1
+
+
+@pytest.mark.data
+def test_mu_rule_on_a_real_mesh_with_a_random_potential(scape):
+    V = np.random.default_rng(1).random(scape.n_vertices)  # random, max about 1
+    _check_mu_rule(scape, V)
 
 
 def test_high_step_traps_low_modes():

@@ -10,6 +10,7 @@ from hamsa.errors import HamsaError, MeshError, MissingDependencyError, Potentia
 from hamsa.io import load_mesh, save_mesh
 from hamsa.mesh import TriMesh
 from hamsa.operators import hamiltonian, mass_matrix, stiffness_matrix
+from hamsa.optimize import optimize_potential
 
 __version__ = "0.1.0"
 
@@ -26,6 +27,7 @@ __all__ = [
     "hamiltonian",
     "load_mesh",
     "mass_matrix",
+    "optimize_potential",
     "save_mesh",
     "shapes",
     "stiffness_matrix",
