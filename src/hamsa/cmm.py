@@ -164,37 +164,9 @@ def compressed_modes(
         start_vector = lbo.vectors[:, i] + 0.1 * rng.standard_normal(n)
         phi = _a_normalize(_a_orthogonalize(start_vector, previous, areas), areas)
         U = np.sqrt(beta) * (areas[:, None] * previous)
-        trace = [mode_objective(W, areas, phi, mu)]
-        majorized = []
-        for iteration in range(1, max_iterations + 1):
-            # the reweighting floor starts large and shrinks to epsilon (continuation, as in Daubechies,
-            # DeVore, Fornasier, Guentuerk 2010): early iterations stay smooth, later ones sharpen
-            floor = max(epsilon, 0.1 * 0.5 ** (iteration - 1)) * np.abs(phi).max()
-            V = 1.0 / (2.0 * np.maximum(np.abs(phi), floor))
-            H = (W + sp.diags(mu * areas * V)).tocsc()
-            if factor is None:
-                factor = CholeskySolver(H)
-            else:
-                factor.refactor(H)
-            inverse = WoodburyInverse(factor, U)
-            new = phi
-            for _ in range(inverse_steps):
-                new = _a_normalize(inverse.solve(areas * new), areas)
-            new = _a_normalize(_a_orthogonalize(new, previous, areas), areas)
-            if np.sum(areas * new) < 0:  # a deterministic sign: positive mean
-                new = -new
-            majorized.append((_majorized(W, areas, phi, V, mu), _majorized(W, areas, new, V, mu)))
-            phi = new
-            trace.append(mode_objective(W, areas, phi, mu))
-            if abs(trace[-1] - trace[-2]) <= tol * abs(trace[-2]) and floor <= epsilon * np.abs(phi).max() * 1.0001:
-                break
-        else:
-            warnings.warn(
-                f"IRLS for mode {i + 1} stopped after {max_iterations} iterations; the last relative change of "
-                f"its objective was {abs(trace[-1] - trace[-2]) / abs(trace[-2]):.1e} > tol {tol:.0e}",
-                ConvergenceWarning,
-                stacklevel=2,
-            )
+        phi, iteration, trace, majorized, factor = _irls_mode(
+            W, areas, mu, phi, previous, U, factor, tol, max_iterations, epsilon, inverse_steps, f"mode {i + 1}"
+        )
         modes[:, i] = phi
         iterations.append(iteration)
         history.append({"objective": trace, "majorized": majorized})
@@ -210,6 +182,44 @@ def compressed_modes(
         mu=mu,
         history=history,
     )
+
+
+def _irls_mode(W, areas, mu, phi, others, U, factor, tol, max_iterations, epsilon, inverse_steps, label):
+    """IRLS for one mode, A-orthogonal to ``others``: returns (phi, iterations, objective trace,
+    majorizer pairs, the factorization object for reuse)."""
+    trace = [mode_objective(W, areas, phi, mu)]
+    majorized = []
+    for iteration in range(1, max_iterations + 1):
+        # the reweighting floor starts large and shrinks to epsilon (continuation, as in Daubechies,
+        # DeVore, Fornasier, Guentuerk 2010): early iterations stay smooth, later ones sharpen
+        relative = max(epsilon, 0.1 * 0.5 ** (iteration - 1))
+        floor = relative * np.abs(phi).max()
+        V = 1.0 / (2.0 * np.maximum(np.abs(phi), floor))
+        H = (W + sp.diags(mu * areas * V)).tocsc()
+        if factor is None:
+            factor = CholeskySolver(H)
+        else:
+            factor.refactor(H)
+        inverse = WoodburyInverse(factor, U)
+        new = phi
+        for _ in range(inverse_steps):
+            new = _a_normalize(inverse.solve(areas * new), areas)
+        new = _a_normalize(_a_orthogonalize(new, others, areas), areas)
+        if np.sum(areas * new) < 0:  # a deterministic sign: positive mean
+            new = -new
+        majorized.append((_majorized(W, areas, phi, V, mu), _majorized(W, areas, new, V, mu)))
+        phi = new
+        trace.append(mode_objective(W, areas, phi, mu))
+        if abs(trace[-1] - trace[-2]) <= tol * abs(trace[-2]) and relative <= epsilon * 1.0001:
+            break
+    else:
+        warnings.warn(
+            f"IRLS for {label} stopped after {max_iterations} iterations; the last relative change of its "
+            f"objective was {abs(trace[-1] - trace[-2]) / abs(trace[-2]):.1e} > tol {tol:.0e}",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+    return phi, iteration, trace, majorized, factor
 
 
 def _admm_modes(
