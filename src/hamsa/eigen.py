@@ -208,8 +208,8 @@ def eigenbasis(
     --------
     >>> import hamsa
     >>> basis = hamsa.eigenbasis(hamsa.shapes.icosphere(3), k=4)
-    >>> [round(float(e), 2) for e in basis.values]  # sphere: 0, then 2 (x3), about l(l+1)
-    [0.0, 2.02, 2.02, 2.02]
+    >>> basis.values[1:].round(2).tolist()  # unit sphere: l(l+1) = 0 (the constant), then 2 three times
+    [2.0, 2.0, 2.0]
     """
     mesh = as_trimesh(mesh)
     if mass not in MASS_KINDS:
