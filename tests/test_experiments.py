@@ -83,3 +83,11 @@ def test_fig8_rate_distortion_runs(tmp_path):
     assert {r["method"] for r in rows} == {"mhb", "hamiltonian", "hamiltonian-opt"}
     mhb = sorted((r["bpv"], r["rms_error"]) for r in rows if r["method"] == "mhb")
     assert all(b[1] < a[1] for a, b in zip(mhb, mhb[1:]))  # more bits per vertex, less error
+
+
+def test_fig9_compressed_modes_runs(tmp_path):
+    numbers = run_experiment("fig9_cmm", tmp_path)
+    assert all(row["orthogonality_error"] < 1e-6 for row in numbers["rows"])
+    assert (tmp_path / "fig9_cmm_runtime.png").stat().st_size > 10_000
+    for ratio in numbers["ratios"].values():
+        assert 0.8 < ratio["objective_hamiltonian_over_admm"] < 1.2  # same objective, similar optima
