@@ -63,16 +63,19 @@ def run(args) -> dict:
             if method == "hamiltonian":
                 shown_mesh, shown = mesh, result
     figure, axis = plt.subplots(figsize=(6, 4))
-    for method in ("hamiltonian", "admm"):
-        mine = [r for r in rows if r["method"] == method]
-        axis.errorbar(
-            [r["n_vertices"] for r in mine],
-            [r["seconds_mean"] for r in mine],
-            yerr=[r["seconds_std"] for r in mine],
-            fmt="o-",
-            capsize=3,
-            label=method,
-        )
+    families = sorted({r["mesh"].split("_")[0] for r in rows})  # capsules of several sizes; the hands
+    for method, color in (("hamiltonian", "tab:blue"), ("admm", "tab:orange")):
+        for family, marker in zip(families, "os^"):
+            mine = [r for r in rows if r["method"] == method and r["mesh"].split("_")[0] == family]
+            axis.errorbar(
+                [r["n_vertices"] for r in mine],
+                [r["seconds_mean"] for r in mine],
+                yerr=[r["seconds_std"] for r in mine],
+                fmt=marker + "-",
+                color=color,
+                capsize=3,
+                label=f"{method} ({family})",
+            )
     axis.set_xscale("log")
     axis.set_yscale("log")
     axis.set_xlabel("vertices")
