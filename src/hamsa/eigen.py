@@ -119,8 +119,8 @@ class Eigenbasis:
             raise HamsaError(f"cannot truncate a basis of {self.k} eigenpairs to {k}")
         return Eigenbasis(self.values[:k], self.vectors[:, :k], self.mass, self.potential, self.mass_kind, self.info)
 
-    def save(self, path) -> None:
-        """Write to an ``.npz`` file atomically (temporary file + rename)."""
+    def save(self, path, extra: dict | None = None) -> None:
+        """Write to an ``.npz`` file atomically (temporary file + rename); ``extra`` arrays ride along."""
         path = Path(path)
         mass = self.mass.tocsr()
         arrays = {
@@ -134,6 +134,7 @@ class Eigenbasis:
         }
         if self.potential is not None:
             arrays["potential"] = self.potential
+        arrays.update(extra or {})
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
         try:
             with os.fdopen(fd, "wb") as handle:
