@@ -12,6 +12,7 @@ Boundaries get the Neumann solution only. Vertices in connected components witho
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from hamsa.errors import HamsaError
 from hamsa.factorization import CholeskySolver
@@ -62,48 +63,71 @@ class GeodesicSolver:
             (W + 1e-10 * W.diagonal().mean() / self._mass.diagonal().mean() * self._mass).tocsc()
         )
         self._components = self.mesh.vertex_components[1]
-        self._corners = [self.mesh.vertices[self.mesh.faces[:, c]] for c in range(3)]
+        self._divergence_operators = self._divergence_matrices(self.mesh)
 
     def distance(self, sources) -> np.ndarray:
         """(n,) distances from the nearest of ``sources`` (vertex indices), 0 at the sources."""
-        mesh = self.mesh
-        index = np.atleast_1d(np.asarray(sources))
-        if index.size == 0:
-            raise HamsaError("no source vertices given")
-        if not np.issubdtype(index.dtype, np.integer) or index.min() < 0 or index.max() >= mesh.n_vertices:
-            raise HamsaError(f"source vertices must be integers in [0, {mesh.n_vertices}), got {sources!r}")
-        delta = np.zeros(mesh.n_vertices)
+        index = self._check(sources)
+        delta = np.zeros(self.mesh.n_vertices)
         delta[index] = self._mass.diagonal()[index]
-        u = self._heat.solve(delta)
-        grad = face_gradients(mesh, u)
-        norm = np.linalg.norm(grad, axis=1)
-        X = -grad / np.where(norm > 0, norm, 1.0)[:, None]
-        divergence = self._divergence(X)
-        phi = self._poisson.solve(-divergence)
-        reached = np.isin(self._components, self._components[index])
-        distance = np.full(mesh.n_vertices, np.inf)
+        phi = self._potential(delta)
+        distance = np.full(self.mesh.n_vertices, np.inf)
         for component in np.unique(self._components[index]):
             members = self._components == component
             at_sources = index[self._components[index] == component]
-            distance[members] = phi[members] - phi[at_sources].min()
-        distance[reached] = np.maximum(distance[reached], 0.0)
+            distance[members] = np.maximum(phi[members] - phi[at_sources].min(), 0.0)
         distance[index] = 0.0  # with several sources the heat method's values there differ by O(h)
         return distance
 
-    def _divergence(self, X: np.ndarray) -> np.ndarray:
-        """Integrated divergence at each vertex: ``1/2 sum_faces (cot a (e1 . X) + cot b (e2 . X))``."""
-        faces = self.mesh.faces
-        p = self._corners
-        out = np.zeros(self.mesh.n_vertices)
+    def distances_from(self, sources) -> np.ndarray:
+        """(n, s) distances from each source separately (column j from ``sources[j]``), in one batch."""
+        index = self._check(sources)
+        n = self.mesh.n_vertices
+        delta = np.zeros((n, len(index)))
+        delta[index, np.arange(len(index))] = self._mass.diagonal()[index]
+        phi = self._potential(delta)
+        distance = np.maximum(phi - phi[index, np.arange(len(index))], 0.0)
+        distance[self._components[:, None] != self._components[index][None, :]] = np.inf
+        distance[index, np.arange(len(index))] = 0.0
+        return distance
+
+    def _check(self, sources) -> np.ndarray:
+        index = np.atleast_1d(np.asarray(sources))
+        n = self.mesh.n_vertices
+        if index.size == 0:
+            raise HamsaError("no source vertices given")
+        if not np.issubdtype(index.dtype, np.integer) or index.min() < 0 or index.max() >= n:
+            raise HamsaError(f"source vertices must be integers in [0, {n}), got {sources!r}")
+        return index
+
+    def _potential(self, delta: np.ndarray) -> np.ndarray:
+        """Steps 1-3 of the heat method for one (n,) or several (n, s) initial heat distributions."""
+        u = self._heat.solve(delta)
+        grad = face_gradients(self.mesh, u)  # (m, 3) or (m, 3, s)
+        norm = np.linalg.norm(grad, axis=1, keepdims=True)
+        X = -grad / np.where(norm > 0, norm, 1.0)
+        divergence = sum(self._divergence_operators[d] @ X[:, d] for d in range(3))
+        return self._poisson.solve(-divergence)
+
+    @staticmethod
+    def _divergence_matrices(mesh) -> list:
+        """Sparse (n, m) operators D_x, D_y, D_z with integrated divergence = sum_d D_d X[:, d]:
+        at a corner i of a face, ``1/2 (cot_k (e1 . X) + cot_j (e2 . X))`` with e1, e2 the edges from i."""
+        faces = mesh.faces
+        p = [mesh.vertices[faces[:, c]] for c in range(3)]
+        n, m = mesh.n_vertices, mesh.n_faces
+        rows, weights = [], []
         for c in range(3):
             i, j, k = c, (c + 1) % 3, (c + 2) % 3
             e1, e2 = p[j] - p[i], p[k] - p[i]
-            # cot of the angle at k (opposite e1) and at j (opposite e2)
-            cot_k = _cot(p[i] - p[k], p[j] - p[k])
-            cot_j = _cot(p[i] - p[j], p[k] - p[j])
-            value = 0.5 * (cot_k * np.einsum("ij,ij->i", e1, X) + cot_j * np.einsum("ij,ij->i", e2, X))
-            out += np.bincount(faces[:, i], weights=value, minlength=self.mesh.n_vertices)
-        return out
+            cot_k = _cot(p[i] - p[k], p[j] - p[k])  # the angle opposite e1
+            cot_j = _cot(p[i] - p[j], p[k] - p[j])  # the angle opposite e2
+            rows.append(faces[:, i])
+            weights.append(0.5 * (cot_k[:, None] * e1 + cot_j[:, None] * e2))
+        rows = np.concatenate(rows)
+        columns = np.tile(np.arange(m), 3)
+        weights = np.concatenate(weights)
+        return [sp.csr_matrix((weights[:, d], (rows, columns)), shape=(n, m)) for d in range(3)]
 
 
 def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
