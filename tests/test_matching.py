@@ -60,3 +60,20 @@ def test_direction_conventions_and_errors(pair):
         match_descriptors(np.zeros((5, 3)), np.zeros((5, 4)))
     with pytest.raises(HamsaError, match="shape"):
         map_from_functional(np.zeros((3, 3)), source, target)
+
+
+@pytest.mark.parametrize("method", ["fmap", "hks", "wks"])
+def test_cli_match(tmp_path, pair, method):
+    from hamsa.cli import main
+
+    flat, rolled = pair
+    hamsa.save_mesh(flat, tmp_path / "flat.ply")
+    hamsa.save_mesh(rolled, tmp_path / "rolled.ply")
+    out = tmp_path / "map.npy"
+    assert (
+        main(["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--method", method, "-o", str(out)])
+        == 0
+    )
+    mapping = np.load(out)
+    errors = geodesic_errors(rolled, mapping, np.arange(flat.n_vertices))
+    assert summary(errors)["within_0.05"] > 0.9
