@@ -88,3 +88,16 @@ def icp_refine(
             break
         mapping = new
     return C, mapping
+
+
+def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, indices) -> np.ndarray:
+    """Signs s_j making target eigenfunction j agree with the source's through a known map.
+
+    ``s_j = sign(<phi_j^source, phi_j^target o map>_A)``: what the paper assumes when it builds the
+    same eigenfunction-sum potential on two shapes (NOTES T14). Uses ground truth: for evaluation only.
+    """
+    index = np.asarray(map_source_to_target)
+    weights = source.mass.diagonal()
+    indices = np.asarray(indices)
+    products = np.sum(weights[:, None] * source.vectors[:, indices] * target.vectors[index][:, indices], axis=0)
+    return np.where(products >= 0, 1.0, -1.0)
