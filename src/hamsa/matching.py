@@ -101,3 +101,29 @@ def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, 
     indices = np.asarray(indices)
     products = np.sum(weights[:, None] * source.vectors[:, indices] * target.vectors[index][:, indices], axis=0)
     return np.where(products >= 0, 1.0, -1.0)
+
+
+def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=None) -> tuple[np.ndarray, np.ndarray]:
+    """Spectral upsampling (ZoomOut, Melzi et al. 2019): refine a point map by alternating
+    ``C_k = Psi_s[:, :k]^T A_s Pi Psi_t[:, :k]`` and the nearest-neighbour map of C_k, for growing k.
+
+    Parameters
+    ----------
+    map_source_to_target : (n_s,) initial point map (e.g. from a small functional map)
+    source, target : eigenbases with at least max(sizes) eigenpairs
+    sizes : increasing basis sizes (default every integer from min(10, k) to k = min(k_s, k_t); starting
+        much smaller collapses the map: a 4-dimensional embedding cannot tell most vertices apart)
+
+    Returns (C, map_source_to_target) at the largest size.
+    """
+    top = min(source.k, target.k)
+    sizes = list(range(min(10, top), top + 1)) if sizes is None else [int(s) for s in sizes]
+    if not sizes or max(sizes) > top or min(sizes) < 1:
+        raise HamsaError(f"sizes must lie in [1, {top}], got {sizes}")
+    mapping = np.asarray(map_source_to_target)
+    C = None
+    for size in sizes:
+        s, t = source.truncate(size), target.truncate(size)
+        C = functional_from_map(mapping, s, t)
+        mapping = map_from_functional(C, s, t)
+    return C, mapping
