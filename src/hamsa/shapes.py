@@ -7,9 +7,13 @@ triangles. Analytic spectra worth knowing: the unit sphere has eigenvalues l(l+1
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from hamsa.errors import MeshError
+from hamsa.implicit import Skeleton, implicit_surface, pose_vertices
 from hamsa.mesh import TriMesh
 
 
@@ -209,3 +213,133 @@ def capsule(radius: float = 0.5, length: float = 2.0, n_around: int = 48, n_alon
     )
     r[0] = r[-1] = 0.0
     return surface_of_revolution(r, z, n_around)
+
+
+# ------------------------------------------------------------------------ articulated shapes
+def _mirror(bones: list[tuple], parent_offset: int) -> list[tuple]:
+    """The bones mirrored to -x, with parents shifted by ``parent_offset`` (or kept when in the trunk)."""
+    mirrored = []
+    for head, tail, radii, parent in bones:
+        flip = np.array([-1.0, 1.0, 1.0])
+        mirrored.append((np.multiply(head, flip), np.multiply(tail, flip), radii, parent + parent_offset))
+    return mirrored
+
+
+def _skeleton(bones: list[tuple], blend: float) -> Skeleton:
+    heads, tails, radii, parents = zip(*bones)
+    return Skeleton(
+        np.array(heads, dtype=np.float64),
+        np.array(tails, dtype=np.float64),
+        np.array(radii, dtype=np.float64),
+        tuple(parents),
+        blend,
+    )
+
+
+def _humanoid_skeleton() -> Skeleton:
+    """A standing figure, 1.75 tall, z up, facing +y, arms lowered 30 degrees (a relaxed A pose)."""
+    trunk = [
+        ((0, 0, 0.90), (0, 0, 1.12), (0.13, 0.14), -1),  # 0 pelvis
+        ((0, 0, 1.12), (0, 0, 1.36), (0.14, 0.15), 0),  # 1 chest
+        ((0, 0, 1.36), (0, 0, 1.50), (0.05, 0.05), 1),  # 2 neck
+        ((0, 0.01, 1.54), (0, 0.02, 1.66), (0.095, 0.085), 2),  # 3 head
+    ]
+    left_arm = [
+        ((0.17, 0, 1.34), (0.42, 0, 1.20), (0.055, 0.045), 1),  # 4 upper arm
+        ((0.42, 0, 1.20), (0.64, 0, 1.08), (0.045, 0.035), 4),  # 5 forearm
+        ((0.64, 0, 1.08), (0.74, 0, 1.03), (0.035, 0.04), 5),  # 6 hand
+    ]
+    left_leg = [
+        ((0.10, 0, 0.90), (0.12, 0, 0.50), (0.075, 0.055), 0),  # 10 thigh
+        ((0.12, 0, 0.50), (0.13, 0, 0.09), (0.055, 0.04), 10),  # 11 shin
+        ((0.13, 0, 0.06), (0.14, 0.13, 0.03), (0.04, 0.035), 11),  # 12 foot
+    ]
+    right_arm = [(h, t, r, p if p < 4 else p + 3) for h, t, r, p in _mirror(left_arm, 0)]
+    right_leg = [(h, t, r, p if p < 10 else p + 3) for h, t, r, p in _mirror(left_leg, 0)]
+    return _skeleton(trunk + left_arm + right_arm + left_leg + right_leg, blend=0.06)
+
+
+_Y, _X, _Z = (0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+
+HUMANOID_POSES = {
+    "rest": {},
+    "arms up": {4: (_Y, -0.7), 7: (_Y, 0.7), 5: (_Y, -0.3), 8: (_Y, 0.3)},
+    "walk": {10: (_X, 0.45), 11: (_X, -0.5), 13: (_X, -0.35), 5: (_X, 0.5), 8: (_X, 0.3), 4: (_X, -0.3), 7: (_X, 0.3)},
+    "wave": {7: (_Y, 1.0), 8: (_Y, 0.6), 3: (_Z, 0.4), 5: (_X, 0.6)},
+    "crouch": {10: (_X, 0.6), 11: (_X, -0.8), 13: (_X, 0.6), 14: (_X, -0.8), 1: (_X, 0.2)},
+}
+"""Joint rotations of the built-in humanoid: bone -> (axis, radians) about the bone's rest head."""
+
+
+def _hand_skeleton() -> Skeleton:
+    """A right hand, palm in the xy plane facing -z, fingers along +y, about 2.3 long."""
+    bones = [((0, -0.55, 0), (0, 0.0, 0), (0.17, 0.19), -1)]  # 0 wrist
+    knuckles = (-0.36, -0.12, 0.12, 0.36)
+    lengths = ((0.38, 0.24, 0.2), (0.46, 0.3, 0.22), (0.44, 0.28, 0.21), (0.32, 0.2, 0.18))
+    for x, phalanges in zip(knuckles, lengths):  # palm bones 1, 5, 9, 13 and three phalanges each
+        bones.append(((0.6 * x, 0.0, 0), (x, 0.75, 0), (0.12, 0.1), 0))
+        direction = np.array([0.25 * x, 1.0, 0.0])
+        direction /= np.linalg.norm(direction)
+        start, radius = np.array([x, 0.75, 0.0]), 0.078
+        parent = len(bones) - 1
+        for length in phalanges:
+            end = start + length * direction
+            bones.append((start, end, (radius, radius - 0.008), parent))
+            start, radius, parent = end, radius - 0.008, len(bones) - 1
+    thumb = [((-0.2, 0.05, 0), (-0.55, 0.35, 0), (0.11, 0.085), 0)]  # 17 metacarpal, 18-19 phalanges
+    start = np.array([-0.55, 0.35, 0.0])
+    direction = np.array([-0.45, 1.0, 0.0]) / np.linalg.norm([-0.45, 1.0, 0.0])
+    for length, parent in ((0.32, 17), (0.26, 18)):
+        thumb.append((start, start + length * direction, (0.085, 0.078), parent))
+        start = start + length * direction
+    return _skeleton(bones + thumb, blend=0.05)
+
+
+_CURL = (_X, -0.55)
+HAND_POSES = {
+    "open": {},
+    "curled": {b: _CURL for b in (2, 3, 4, 6, 7, 8, 10, 11, 12, 14, 15, 16)} | {18: (_Z, -0.3)},
+    "pointing": {b: (_X, -0.9) for b in (6, 7, 8, 10, 11, 12, 14, 15, 16)} | {18: (_Z, -0.5), 19: (_X, -0.5)},
+    "spread": {2: (_Z, 0.2), 14: (_Z, -0.12), 17: (_Z, 0.25), 3: _CURL, 11: _CURL},
+}
+"""Joint rotations of the built-in hand: bone -> (axis, radians)."""
+
+
+@lru_cache(maxsize=8)
+def _rest(kind: str, spacing: float) -> TriMesh:
+    skeleton = _humanoid_skeleton() if kind == "humanoid" else _hand_skeleton()
+    lower, upper = skeleton.bounds()
+    return implicit_surface(skeleton, lower, upper, spacing)
+
+
+def _posed(kind: str, pose: str, spacing: float) -> TriMesh:
+    poses = HUMANOID_POSES if kind == "humanoid" else HAND_POSES
+    if pose not in poses:
+        raise MeshError(f"unknown {kind} pose '{pose}'; known: {', '.join(poses)}")
+    rest = _rest(kind, float(spacing))
+    if not poses[pose]:
+        return rest
+    skeleton = _humanoid_skeleton() if kind == "humanoid" else _hand_skeleton()
+    blend = 1.3 * float(np.median(skeleton.radii))
+    return TriMesh(pose_vertices(skeleton, rest.vertices, poses[pose], blend), rest.faces)
+
+
+def humanoid(pose: str = "rest", spacing: float = 0.02) -> TriMesh:
+    """An articulated human-like surface (head, arms, hands, legs, feet; genus 0), 1.75 tall, z up.
+
+    Generated in code: a skeleton of round cones blended into one implicit surface, meshed by surface
+    nets (:mod:`hamsa.implicit`) — about 7 300 vertices at the default ``spacing`` (length units per
+    grid cell), 2 700 at 0.025. Every pose in :data:`HUMANOID_POSES` bends the same rest mesh at its joints, so
+    all poses share the connectivity and vertex i corresponds to vertex i: a near-isometric family with
+    identity ground truth, like TOSCA or SCAPE (edge lengths change by a few percent, more at bent joints).
+    """
+    return _posed("humanoid", pose, spacing)
+
+
+def hand(pose: str = "open", spacing: float = 0.03) -> TriMesh:
+    """An articulated hand-like surface: wrist, palm, four fingers of three phalanges and a thumb.
+
+    About 2.3 long, palm in the xy plane, fingers along +y; about 6 000 vertices at the default
+    ``spacing``. Poses in :data:`HAND_POSES` share the connectivity (see :func:`humanoid`).
+    """
+    return _posed("hand", pose, spacing)
