@@ -96,6 +96,14 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
+    reproduce = commands.add_parser(
+        "reproduce", help="run every experiment of the paper and write report/index.html + results.json"
+    )
+    reproduce.add_argument("--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in")
+    reproduce.add_argument("--quick", action="store_true", help="smaller sizes: a few minutes on 2 cores")
+    reproduce.add_argument("--force", action="store_true", help="re-run experiments whose cached results are intact")
+    reproduce.add_argument("--only", nargs="+", metavar="NAME", help="experiments to run (names or prefixes: fig2 fig7)")
+    reproduce.add_argument("-o", "--output", default="report", help="report folder (default: report)")
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
     demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
@@ -334,6 +342,21 @@ def _match(args) -> None:
     print(f"wrote           {output}")
 
 
+def _reproduce(args) -> None:
+    from hamsa.reproduce import reproduce
+
+    results = reproduce(args.output, data=args.data, quick=args.quick, force=args.force, only=args.only)
+    failed = [name for name, r in results["experiments"].items() if r["status"] != "ok"]
+    verdicts = [c["verdict"] for c in results["claims"]]
+    print(
+        f"hamsa reproduce: {len(results['experiments']) - len(failed)} experiments ok"
+        + (f", failed: {', '.join(failed)}" if failed else "")
+        + f"; claims: {verdicts.count('reproduced')} reproduced, {verdicts.count('not reproduced')} not reproduced, "
+        f"{len(verdicts) - verdicts.count('reproduced') - verdicts.count('not reproduced')} other"
+    )
+    print(f"report: {Path(args.output).resolve() / 'index.html'}")
+
+
 def _demo(args) -> None:
     from hamsa.demo import step_potential_demo
 
@@ -368,6 +391,7 @@ def main(argv: list[str] | None = None) -> int:
         "decompress": _decompress,
         "modes": _modes,
         "match": _match,
+        "reproduce": _reproduce,
         "demo": _demo,
     }
     try:

@@ -4,8 +4,11 @@
 (Gibson 1998): one vertex per grid cell that the surface crosses, at the mean of the cell's edge
 crossings, then one quad per crossed grid edge joining the four cells around it, split into two
 triangles along the shorter diagonal. The vertices are then evened out by a few rounds of damped
-umbrella smoothing, each followed by Newton steps that put them back on ``f = 0``. Unlike marching cubes, surface nets gives well-shaped triangles of about the
-grid spacing, which the cotangent Laplacian needs.
+umbrella smoothing, each followed by Newton steps that put them back on ``f = 0``. Unlike marching
+cubes, surface nets gives well-shaped triangles of about the grid spacing, which the cotangent
+Laplacian needs. Where the surface passes within a fraction of a cell of a saddle, a cell can be
+ambiguous (two sheets through one cell); the grid value nearest to zero is flipped until none is,
+so the result is always a closed manifold.
 
 :class:`Skeleton` is a union of "round cones" (capsules with a radius varying along the bone),
 blended with a polynomial smooth minimum — the built-in humanoid and hand of :mod:`hamsa.shapes`.

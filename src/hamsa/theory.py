@@ -72,3 +72,37 @@ def critical_potential_scale(lbo_basis: Eigenbasis, potential, index: int) -> fl
     if denominator <= 0:
         return float("inf")
     return float(lbo_basis.values[index] / denominator)
+
+
+def first_order_eigenvector(values, vectors, stiffness_change, mass_change, index: int) -> np.ndarray:
+    """The paper's first-order eigenvector perturbation (eq. perturbation, NOTES.md T13).
+
+    For ``H psi = E A psi`` perturbed to ``(H + dH) psi~ = E~ (A + dA) psi~``::
+
+        psi~_i ~ psi_i (1 - psi_i^T dA psi_i / 2) + sum_{k != i} psi_k^T (dH - E_i dA) psi_i / (E_i - E_k) psi_k
+
+    with signed changes (the paper writes |.|, which is not a perturbation expansion) and ``dH`` including
+    the change of ``A diag(V)``. The sum runs over the columns given: pass the complete basis (small
+    meshes) for the exact first-order term, or a truncated one for an approximation.
+
+    Parameters
+    ----------
+    values : (m,) eigenvalues E, vectors : (n, m) A-orthonormal eigenvectors
+    stiffness_change, mass_change : (n, n) sparse or dense, dH and dA
+    index : the eigenpair to perturb (0-based, a simple eigenvalue)
+
+    Returns
+    -------
+    (n,) the predicted perturbed eigenvector, normalized like psi_i (to first order).
+    """
+    values = np.asarray(values, dtype=np.float64)
+    vectors = np.asarray(vectors, dtype=np.float64)
+    if not 0 <= index < values.size:
+        raise HamsaError(f"index {index} is outside the basis (m = {values.size})")
+    psi = vectors[:, index]
+    coupling = vectors.T @ (stiffness_change @ psi - values[index] * (mass_change @ psi))
+    gaps = values[index] - values
+    gaps[index] = np.inf
+    if np.any(np.abs(gaps) < 1e-12 * max(np.abs(values).max(), 1.0)):
+        raise HamsaError(f"eigenvalue {index} is repeated: the first-order formula needs a simple eigenvalue")
+    return psi * (1 - psi @ (mass_change @ psi) / 2) + vectors @ (coupling / gaps)

@@ -12,9 +12,6 @@ import numpy as np
 import hamsa
 from hamsa.io import atomic_write
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-
-
 def parse_args(description: str, argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("-o", "--output", default="report", help="folder for the PNG and JSON files")
@@ -73,3 +70,9 @@ class Timer:
 
     def __call__(self) -> float:
         return round(time.perf_counter() - self.start, 2)
+
+
+def save_figure(figure, path: Path, dpi: int = 110) -> None:
+    """Save a matplotlib figure as PNG atomically (a killed run never leaves half an image)."""
+    with atomic_write(path, "wb") as handle:
+        figure.savefig(handle, format="png", dpi=dpi)

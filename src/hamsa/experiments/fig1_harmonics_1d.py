@@ -9,23 +9,21 @@ Writes fig1_harmonics_1d.png and fig1_harmonics_1d.json (numeric vs analytic eig
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy.sparse as sp  # noqa: E402
-from scipy.optimize import brentq  # noqa: E402
-from scipy.special import eval_hermite, factorial  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import brentq
+from scipy.special import eval_hermite, factorial
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from hamsa.eigen import generalized_eigsh  # noqa: E402
-from hamsa.interval import interval_operators  # noqa: E402
+from hamsa.eigen import generalized_eigsh
+from hamsa.interval import interval_operators
 
-from _common import Timer, parse_args, write_json  # noqa: E402
+from ._common import Timer, parse_args, write_json, save_figure
 
 LENGTH = 1.0
 
@@ -136,7 +134,7 @@ def run(args) -> dict:
     figure.suptitle("Fig. 1 - 1-D harmonics: FEM (lines) vs analytic (dots; dotted lines = analytic E_n)")
     figure.tight_layout()
     png = Path(args.output) / "fig1_harmonics_1d.png"
-    figure.savefig(png, dpi=110)
+    save_figure(figure, png)
     plt.close(figure)
     numbers["max_relative_error"] = max(float(np.max(numbers[c]["relative_error"])) for c in cases)
     numbers["seconds"] = timer()

@@ -10,18 +10,16 @@ heat centroid's geodesic distance to the leg. Writes fig3_diffusion.png and .jso
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import shapes, viz  # noqa: E402
-from hamsa.diffusion import heat_kernel, total_heat  # noqa: E402
-from hamsa.geodesic import geodesic_distance  # noqa: E402
+import hamsa
+from hamsa import shapes, viz
+from hamsa.diffusion import heat_kernel, total_heat
+from hamsa.geodesic import geodesic_distance
 
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
+from ._common import Timer, data_file, parse_args, unit_area, write_json
 
 
 def run(args) -> dict:

@@ -9,17 +9,15 @@ eigenvalue's cluster) over the first 20 eigenfunctions. Writes fig4_nodal.png an
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import potentials, shapes, viz  # noqa: E402
-from hamsa.nodal import courant_check, nodal_domains  # noqa: E402
+import hamsa
+from hamsa import potentials, shapes, viz
+from hamsa.nodal import courant_check, nodal_domains
 
-from _common import Timer, dataset_or_builtin, parse_args, write_json  # noqa: E402
+from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 
 def run(args) -> dict:

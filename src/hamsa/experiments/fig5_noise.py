@@ -10,17 +10,15 @@ for comparison, the LBO. Writes fig5_noise.png (first modes, clean vs perturbed)
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import potentials, shapes, viz  # noqa: E402
-from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise  # noqa: E402
+import hamsa
+from hamsa import potentials, shapes, viz
+from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise
 
-from _common import Timer, dataset_or_builtin, parse_args, write_json  # noqa: E402
+from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 
 def run(args) -> dict:

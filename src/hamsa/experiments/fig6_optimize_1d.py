@@ -8,22 +8,20 @@ The paper says the optimized potential is "high close to the boundary". Writes f
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy.sparse as sp  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import scipy.sparse as sp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from hamsa.eigen import generalized_eigsh  # noqa: E402
-from hamsa.interval import interval_operators  # noqa: E402
-from hamsa.optimize import optimize_potential  # noqa: E402
+from hamsa.eigen import generalized_eigsh
+from hamsa.interval import interval_operators
+from hamsa.optimize import optimize_potential
 
-from _common import Timer, parse_args, write_json  # noqa: E402
+from ._common import Timer, parse_args, write_json, save_figure
 
 
 def run(args) -> dict:
@@ -63,7 +61,7 @@ def run(args) -> dict:
         axis.legend(fontsize=8)
         axis.set_xlabel("x" if axis is not axes[2] else "iteration")
     figure.tight_layout()
-    figure.savefig(Path(args.output) / "fig6_optimize_1d.png", dpi=110)
+    save_figure(figure, Path(args.output) / "fig6_optimize_1d.png")
     plt.close(figure)
     numbers["seconds"] = timer()
     write_json(Path(args.output) / "fig6_optimize_1d.json", numbers)

@@ -10,17 +10,15 @@ colored by the per-vertex reconstruction error. Writes fig7_optimize_hand.png an
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import shapes, viz  # noqa: E402
-from hamsa.optimize import optimize_potential  # noqa: E402
+import hamsa
+from hamsa import shapes, viz
+from hamsa.optimize import optimize_potential
 
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
+from ._common import Timer, data_file, parse_args, unit_area, write_json
 
 
 def run(args) -> dict:

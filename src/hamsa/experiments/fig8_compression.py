@@ -10,21 +10,19 @@ the RMS vertex error over the bounding-box diagonal. The vertex order of H is re
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import scipy.sparse as sp  # noqa: E402
+import matplotlib.pyplot as plt
+import scipy.sparse as sp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import compression, shapes  # noqa: E402
-from hamsa.optimize import optimize_potential  # noqa: E402
+import hamsa
+from hamsa import compression, shapes
+from hamsa.optimize import optimize_potential
 
-from _common import Timer, data_file, parse_args, write_json  # noqa: E402
+from ._common import Timer, data_file, parse_args, write_json, save_figure
 
 METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
 LABELS = {"mhb": "MHB", "hamiltonian": "H (alpha i + beta)", "hamiltonian-opt": "H opt (V not counted)"}
@@ -79,7 +77,7 @@ def run(args) -> dict:
         axis.grid(True, which="both", alpha=0.3)
     figure.suptitle(f"Spectral compression of {name} ({n} vertices), {bits} bits per coefficient")
     figure.tight_layout()
-    figure.savefig(Path(args.output) / "fig8_compression.png", dpi=110)
+    save_figure(figure, Path(args.output) / "fig8_compression.png")
     plt.close(figure)
     ordering = []
     for count in counts:

@@ -9,7 +9,6 @@ fig9_cmm_runtime.png and fig9_cmm.json.
 
 from __future__ import annotations
 
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -17,15 +16,14 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import hamsa  # noqa: E402
-from hamsa import shapes, viz  # noqa: E402
-from hamsa.cmm import compressed_modes  # noqa: E402
+import hamsa
+from hamsa import shapes, viz
+from hamsa.cmm import compressed_modes
 
-from _common import Timer, data_file, parse_args, unit_area, write_json  # noqa: E402
+from ._common import Timer, data_file, parse_args, unit_area, write_json, save_figure
 
 
 def run(args) -> dict:
@@ -83,7 +81,7 @@ def run(args) -> dict:
     axis.legend()
     axis.grid(True, which="both", alpha=0.3)
     figure.tight_layout()
-    figure.savefig(Path(args.output) / "fig9_cmm_runtime.png", dpi=110)
+    save_figure(figure, Path(args.output) / "fig9_cmm_runtime.png")
     plt.close(figure)
     count = min(5, K)
     viz.render_fields(
