@@ -102,7 +102,9 @@ def _parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in")
     reproduce.add_argument("--quick", action="store_true", help="smaller sizes: a few minutes on 2 cores")
     reproduce.add_argument("--force", action="store_true", help="re-run experiments whose cached results are intact")
-    reproduce.add_argument("--only", nargs="+", metavar="NAME", help="experiments to run (names or prefixes: fig2 fig7)")
+    reproduce.add_argument(
+        "--only", nargs="+", metavar="NAME", help="experiments to run (names or prefixes: fig2 fig7)"
+    )
     reproduce.add_argument("-o", "--output", default="report", help="report folder (default: report)")
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")

@@ -127,3 +127,16 @@ def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=
         C = functional_from_map(mapping, s, t)
         mapping = map_from_functional(C, s, t)
     return C, mapping
+
+
+def offdiagonal_energy(C: np.ndarray) -> float:
+    """``||C - diag(C)||_F / ||C||_F``: 0 for a diagonal functional map (NOTES T14's "more diagonal")."""
+    C = np.asarray(C, dtype=np.float64)
+    if C.ndim != 2:
+        raise HamsaError(f"C must be a matrix, got shape {C.shape}")
+    total = np.linalg.norm(C)
+    if total == 0:
+        raise HamsaError("C is zero")
+    diagonal = np.zeros_like(C)
+    np.fill_diagonal(diagonal, np.diagonal(C))
+    return float(np.linalg.norm(C - diagonal) / total)

@@ -12,6 +12,7 @@ import numpy as np
 import hamsa
 from hamsa.io import atomic_write
 
+
 def parse_args(description: str, argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("-o", "--output", default="report", help="folder for the PNG and JSON files")
@@ -32,13 +33,18 @@ def data_file(data: str | None, relative: str) -> Path | None:
     return path if path.exists() else None
 
 
-def dataset_or_builtin(args, relative: str, builtin):
+def dataset_or_builtin(args, relative: str):
     """(mesh, name, from_data): the unit-area dataset mesh when --data holds it and not --quick, else
-    ``builtin()`` (a TriMesh), also scaled to unit area."""
+    the built-in humanoid (rest pose; coarser with --quick), also scaled to unit area."""
     path = data_file(args.data, relative)
     if path and not args.quick:
         return unit_area(hamsa.load_mesh(path)), f"TOSCA {Path(relative).name.split('.')[0]}", True
-    return unit_area(builtin()), "built-in capsule", False
+    return builtin_humanoid(args), "built-in humanoid", False
+
+
+def builtin_humanoid(args, pose: str = "rest") -> hamsa.TriMesh:
+    """The built-in humanoid at unit area: about 2 000 vertices with --quick, 6 300 without."""
+    return unit_area(hamsa.shapes.humanoid(pose, spacing=0.035 if args.quick else 0.02))
 
 
 def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:

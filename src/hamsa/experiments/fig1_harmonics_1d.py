@@ -23,7 +23,7 @@ from scipy.special import eval_hermite, factorial
 from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
 
-from ._common import Timer, parse_args, write_json, save_figure
+from ._common import Timer, parse_args, save_figure, write_json
 
 LENGTH = 1.0
 

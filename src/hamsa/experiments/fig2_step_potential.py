@@ -1,6 +1,6 @@
 """Fig. 2: LBO eigenfunctions |phi_i| vs Hamiltonian eigenfunctions |psi_i| under a finite step potential.
 
-On a TOSCA human (michael0, with --data) or the built-in capsule, V = V0 on the half of the body where
+On a TOSCA human (michael0, with --data) or the built-in humanoid, V = V0 on the half of the body where
 the first non-constant LBO eigenfunction is positive (an intrinsic, orientation-free choice), 0 on
 the other half. V0 is the 10th LBO eigenvalue. Modes with E_i < V0 stay in the V = 0 half (their
 A-mass fraction there is reported); the first modes above V0 spread over the whole body.
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa import potentials, shapes, viz
+from hamsa import potentials, viz
 from hamsa.theory import eigenvalue_bounds, mass_fraction
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
@@ -22,9 +22,7 @@ from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 def run(args) -> dict:
     timer = Timer()
-    mesh, name, from_data = dataset_or_builtin(
-        args, "tosca_hires/meshes/michael0.off.gz", lambda: shapes.capsule(0.5, 3.0, 48)
-    )
+    mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/michael0.off.gz")
     view = "auto" if from_data else "xz"
     count = 8
     lbo = hamsa.eigenbasis(mesh, 12)

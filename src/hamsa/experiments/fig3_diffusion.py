@@ -3,8 +3,8 @@
 The Hamiltonian's potential is mu times the geodesic distance from the tip of the front-left leg
 (Kim et al. landmarks 1 "top of head" and 5 "tip of front left leg"), normalized to [0, 1], with
 mu = lambda_20 of the LBO: heat is absorbed where V is large, so under H it survives towards the
-leg. With no --data, the built-in capsule: heat from one pole, V = distance from a point near the
-other pole. Temperatures are shown at three times; the JSON holds, per time, the total heat and the
+leg. With no --data, the built-in humanoid: heat from the top of the head, V = distance from the
+sole of the left foot. Temperatures are shown at three times; the JSON holds, per time, the total heat and the
 heat centroid's geodesic distance to the leg. Writes fig3_diffusion.png and .json.
 """
 
@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa import shapes, viz
+from hamsa import viz
 from hamsa.diffusion import heat_kernel, total_heat
 from hamsa.geodesic import geodesic_distance
 
-from ._common import Timer, data_file, parse_args, unit_area, write_json
+from ._common import Timer, builtin_humanoid, data_file, parse_args, unit_area, write_json
 
 
 def run(args) -> dict:
@@ -32,9 +32,11 @@ def run(args) -> dict:
         # TOSCA's centaur stands along +z, facing -y: look at its side
         head, leg, name, view = int(ids[1]), int(ids[5]), "TOSCA centaur0", ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
     else:
-        mesh = unit_area(shapes.capsule(0.5, 3.0, 40))
-        z = mesh.vertices[:, 2]
-        head, leg, name, view = int(np.argmax(z)), int(np.argmin(np.abs(z - (z.min() + 0.1)))), "built-in capsule", "xz"
+        mesh = builtin_humanoid(args)
+        x, z = mesh.vertices[:, 0], mesh.vertices[:, 2]
+        head = int(np.argmax(z))  # top of the head
+        leg = int(np.argmin(np.where(x > 0, z, np.inf)))  # sole of the left foot
+        name, view = "built-in humanoid", "xz"
     k = 100 if args.quick else 200
     lbo = hamsa.eigenbasis(mesh, k)
     mu = float(lbo.values[19])

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa import potentials, shapes, viz
+from hamsa import potentials, viz
 from hamsa.nodal import courant_check, nodal_domains
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
@@ -22,9 +22,7 @@ from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 def run(args) -> dict:
     timer = Timer()
-    mesh, name, from_data = dataset_or_builtin(
-        args, "tosca_hires/meshes/dog0.off.gz", lambda: shapes.capsule(0.5, 3.0, 40)
-    )
+    mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/dog0.off.gz")
     view = "auto" if from_data else "xz"
     lbo = hamsa.eigenbasis(mesh, 20)
     scale = float(lbo.values[9])

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa import potentials, shapes, viz
+from hamsa import potentials, viz
 from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
@@ -23,9 +23,7 @@ from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 def run(args) -> dict:
     timer = Timer()
-    mesh, name, from_data = dataset_or_builtin(
-        args, "tosca_hires/meshes/michael1.off.gz", lambda: shapes.capsule(0.5, 3.0, 48)
-    )
+    mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/michael1.off.gz")
     view = "auto" if from_data else "xz"
     k = 10
     lbo = hamsa.eigenbasis(mesh, k)

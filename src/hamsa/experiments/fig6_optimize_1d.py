@@ -21,7 +21,7 @@ from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
 from hamsa.optimize import optimize_potential
 
-from ._common import Timer, parse_args, write_json, save_figure
+from ._common import Timer, parse_args, save_figure, write_json
 
 
 def run(args) -> dict:

@@ -3,8 +3,8 @@
 X = the vertex coordinates (unit-area, centered mesh), k = 50, mass-weighted loss
 ||Psi Psi^T A X - X||_A^2, L-BFGS from V = 0 in the span of m = 300 LBO eigenvectors. The paper reports
 0.0015 (LBO) vs 0.00061 (optimized Hamiltonian), ratio about 2.5, on its own hand mesh and
-normalization (not available); we report ours on ../shared/data/classic/hand_6k.off (or a built-in
-capsule without --data). Renders V (negative at the fingers, per the paper) and both reconstructions,
+normalization (not available); we report ours on ../shared/data/classic/hand_6k.off (or the built-in
+hand, k = 20, without --data). Renders V (negative at the fingers, per the paper) and both reconstructions,
 colored by the per-vertex reconstruction error. Writes fig7_optimize_hand.png and .json.
 """
 
@@ -28,7 +28,7 @@ def run(args) -> dict:
         mesh, name = unit_area(hamsa.load_mesh(path)), "hand_6k"
         k, m, iterations = 50, 300, 60
     else:
-        mesh, name = unit_area(shapes.capsule(0.5, 2.0, 24)), "built-in capsule"
+        mesh, name = unit_area(shapes.hand(spacing=0.06 if args.quick else 0.035)), "built-in hand"
         k, m, iterations = 20, 100, 40
     X = mesh.vertices
     result = optimize_potential(mesh, X, k, m=m, max_iterations=iterations)

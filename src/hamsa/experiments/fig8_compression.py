@@ -22,7 +22,7 @@ import hamsa
 from hamsa import compression, shapes
 from hamsa.optimize import optimize_potential
 
-from ._common import Timer, data_file, parse_args, write_json, save_figure
+from ._common import Timer, data_file, parse_args, save_figure, write_json
 
 METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
 LABELS = {"mhb": "MHB", "hamiltonian": "H (alpha i + beta)", "hamiltonian-opt": "H opt (V not counted)"}

@@ -23,7 +23,7 @@ import hamsa
 from hamsa import shapes, viz
 from hamsa.cmm import compressed_modes
 
-from ._common import Timer, data_file, parse_args, unit_area, write_json, save_figure
+from ._common import Timer, data_file, parse_args, save_figure, unit_area, write_json
 
 
 def run(args) -> dict:

@@ -1,0 +1,234 @@
+"""``hamsa reproduce``: every experiment of the paper into one self-contained report.
+
+Runs each module of :mod:`hamsa.experiments` into an output folder and writes
+
+- ``index.html``: the figures (embedded, so the page opens offline and can be mailed), the numbers of
+  every experiment, and the checklist of the paper's claims (NOTES.md §8, T1–T17) marked reproduced /
+  not reproduced / not applicable with the measured value;
+- ``results.json``: the same numbers and verdicts, for scripts.
+
+A failing experiment is recorded (with its traceback) and the others still run. Finished experiments are
+cached: ``.state/<name>.json`` holds the hash of the inputs (hamsa version, the experiment's source, the
+data folder, quick or not) and the SHA-256 of every file the experiment wrote; a re-run skips an
+experiment only when both still match, so a run killed midway resumes where it stopped and never trusts
+a half-written file (all outputs are written to a temporary file and renamed).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import html
+import inspect
+import json
+import time
+import traceback
+from pathlib import Path
+from types import SimpleNamespace
+
+from hamsa import __version__
+from hamsa.claims import evaluate_claims
+from hamsa.errors import HamsaError
+from hamsa.experiments import EXPERIMENTS, Experiment
+from hamsa.experiments import _common as common
+from hamsa.io import atomic_write
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def input_key(experiment: Experiment, data: str | None, quick: bool) -> str:
+    """Hash of everything an experiment's result depends on: version, source code, data folder, quick."""
+    digest = hashlib.sha256()
+    for part in (__version__, inspect.getsource(experiment.module()), inspect.getsource(common)):
+        digest.update(part.encode())
+    digest.update(json.dumps([str(Path(data).resolve()) if data else None, bool(quick)]).encode())
+    return digest.hexdigest()
+
+
+def _output_files(output: Path, experiment: Experiment) -> list[Path]:
+    return sorted(p for p in output.glob(f"{experiment.prefix}*") if p.suffix in (".png", ".json"))
+
+
+def _cached(state_path: Path, key: str, output: Path) -> dict | None:
+    """The recorded result when its key matches and every recorded file is intact, else None."""
+    try:
+        state = json.loads(state_path.read_text())
+        if state["key"] != key or state["status"] != "ok":
+            return None
+        for name, digest in state["files"].items():
+            if _sha256(output / name) != digest:
+                return None
+        return state
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def run_experiment(experiment: Experiment, output: Path, data: str | None, quick: bool, force: bool = False) -> dict:
+    """Run one experiment unless an intact cached result exists; returns its state record."""
+    state_dir = output / ".state"
+    state_dir.mkdir(parents=True, exist_ok=True)
+    state_path = state_dir / f"{experiment.name}.json"
+    key = input_key(experiment, data, quick)
+    if not force:
+        cached = _cached(state_path, key, output)
+        if cached is not None:
+            return {**cached, "cached": True}
+    start = time.perf_counter()
+    try:
+        numbers = experiment.module().run(SimpleNamespace(output=str(output), data=data, quick=quick))
+    except Exception as error:  # recorded in the report; the other experiments still run
+        return {
+            "name": experiment.name,
+            "status": "failed",
+            "error": f"{type(error).__name__}: {error}",
+            "traceback": traceback.format_exc(),
+            "seconds": round(time.perf_counter() - start, 2),
+            "cached": False,
+        }
+    files = {p.name: _sha256(p) for p in _output_files(output, experiment)}
+    state = {
+        "name": experiment.name,
+        "status": "ok",
+        "key": key,
+        "files": files,
+        "numbers": common._plain(numbers),
+        "seconds": round(time.perf_counter() - start, 2),
+    }
+    with atomic_write(state_path, "w") as handle:
+        json.dump(state, handle)
+    return {**state, "cached": False}
+
+
+def reproduce(
+    output,
+    data: str | None = None,
+    quick: bool = False,
+    force: bool = False,
+    only: list[str] | None = None,
+    progress: bool = True,
+) -> dict:
+    """Run the experiments into ``output`` and write ``results.json`` and ``index.html`` there.
+
+    Parameters
+    ----------
+    output : folder (created)
+    data : a folder laid out like shared/data (TOSCA, SCAPE, classic, hand); None: built-in shapes
+    quick : smaller sizes (the CI and ``make demo`` setting)
+    force : re-run experiments even when their cached results are intact
+    only : names (or name prefixes like ``fig7``) of the experiments to run; default all
+    progress : show a progress bar over the experiments
+
+    Returns
+    -------
+    The ``results.json`` content: ``experiments`` (name -> status, seconds, numbers or error, files)
+    and ``claims`` (a list of {id, claim, verdict, measured, source}).
+    """
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    if data is not None and not Path(data).is_dir():
+        raise HamsaError(f"data folder '{data}' does not exist")
+    chosen = [e for e in EXPERIMENTS if not only or any(e.name.startswith(o) for o in only)]
+    if not chosen:
+        names = ", ".join(e.name for e in EXPERIMENTS)
+        raise HamsaError(f"no experiment matches {only}; known: {names}")
+    for stale in [*output.glob(".*.tmp"), *(output / ".state").glob(".*.tmp")]:
+        stale.unlink(missing_ok=True)  # left by a killed run; outputs only ever appear by rename
+    from tqdm.auto import tqdm
+
+    records = {}
+    bar = tqdm(chosen, desc="reproduce", unit="experiment", disable=not progress)
+    for experiment in bar:
+        bar.set_postfix_str(experiment.name)
+        records[experiment.name] = run_experiment(experiment, output, data, quick, force)
+        if progress:
+            record = records[experiment.name]
+            how = "cached" if record["cached"] else f"{record['seconds']} s"
+            bar.write(f"  {experiment.name}: {record['status']} ({how})")
+    results = {
+        "hamsa_version": __version__,
+        "data": str(Path(data).resolve()) if data else None,
+        "quick": bool(quick),
+        "experiments": {
+            name: {k: v for k, v in record.items() if k not in ("key", "traceback")} for name, record in records.items()
+        },
+        "claims": evaluate_claims({n: r.get("numbers") for n, r in records.items() if r["status"] == "ok"}),
+    }
+    common.write_json(output / "results.json", results)
+    with atomic_write(output / "index.html", "w") as handle:
+        handle.write(report_html(results, records, output))
+    return results
+
+
+# ------------------------------------------------------------------------------------ HTML
+_STYLE = """
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #ccc;padding:.25em .6em;
+text-align:left;vertical-align:top;font-size:.9em}th{background:#f3f3f3}img{max-width:100%;border:1px solid #ddd}
+.reproduced{background:#e3f6e3}.not-reproduced{background:#fde2e2}.not-applicable,.not-run{background:#eee}
+pre{background:#f7f7f7;padding:.5em;overflow:auto;font-size:.8em}code{font-size:.9em}
+"""
+
+
+def _scalars(numbers, prefix=""):
+    """(key, value) rows of the numbers worth a table: scalars and short lists, nested keys dotted."""
+    rows = []
+    for key, value in (numbers or {}).items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            rows += _scalars(value, name + ".")
+        elif isinstance(value, list):
+            if len(value) <= 8 and all(isinstance(v, (int, float, bool, str)) or v is None for v in value):
+                rows.append((name, ", ".join(_format(v) for v in value)))
+        else:
+            rows.append((name, _format(value)))
+    return rows
+
+
+def _format(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def report_html(results: dict, records: dict, output: Path) -> str:
+    """The self-contained report page (figures embedded as base64 PNG)."""
+    e = html.escape
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>hamsa reproduce</title>",
+        f"<style>{_STYLE}</style></head><body>",
+        "<h1>Hamiltonian Operator for Spectral Shape Analysis — reproduced by hamsa</h1>",
+        f"<p>hamsa {e(results['hamsa_version'])}; data: {e(str(results['data'] or 'built-in shapes'))}; "
+        f"{'quick sizes' if results['quick'] else 'full sizes'}. Paper: Choukroun, Shtern, Bronstein &amp; "
+        "Kimmel, IEEE TVCG 2018. Numbers are also in <code>results.json</code>.</p>",
+        "<h2>Claims checklist</h2><table><tr><th>id</th><th>claim</th><th>verdict</th><th>measured</th>"
+        "<th>source</th></tr>",
+    ]
+    for claim in results["claims"]:
+        css = claim["verdict"].replace(" ", "-")
+        parts.append(
+            f"<tr class='{css}'><td>{e(claim['id'])}</td><td>{e(claim['claim'])}</td><td>{e(claim['verdict'])}</td>"
+            f"<td>{e(claim['measured'])}</td><td>{e(claim['source'])}</td></tr>"
+        )
+    parts.append("</table>")
+    for experiment in EXPERIMENTS:
+        record = records.get(experiment.name)
+        if record is None:
+            continue
+        parts.append(f"<h2 id='{experiment.name}'>{e(experiment.title)}</h2>")
+        doc = (experiment.module().__doc__ or "").strip()
+        parts.append(f"<p>{e(doc)}</p>".replace("\n\n", "</p><p>"))
+        if record["status"] != "ok":
+            parts.append(f"<p><b>Failed</b>: {e(record['error'])}</p><pre>{e(record.get('traceback', ''))}</pre>")
+            continue
+        for name in record["files"]:
+            if name.endswith(".png"):
+                encoded = base64.b64encode((output / name).read_bytes()).decode()
+                parts.append(f"<p><img alt='{e(name)}' src='data:image/png;base64,{encoded}'></p>")
+        parts.append(f"<p>{record['seconds']} s{' (cached)' if record['cached'] else ''}</p>")
+        parts.append("<table><tr><th>quantity</th><th>value</th></tr>")
+        parts += [f"<tr><td>{e(k)}</td><td>{e(v)}</td></tr>" for k, v in _scalars(record["numbers"])]
+        parts.append("</table>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
