@@ -86,3 +86,16 @@ def test_demo_prints_the_theorem_1_table(capsys):
     out = capsys.readouterr().out
     rows = [line for line in out.splitlines() if line.strip()[:1].isdigit() and ("ok" in line or "FAIL" in line)]
     assert len(rows) == 8 and all(" ok " in row for row in rows)
+
+
+def test_cli_view_writes_a_self_contained_page(tmp_path):
+    pytest.importorskip("plotly", reason="interactive views need the [viz] extra")
+    from hamsa.io import save_mesh
+
+    mesh_path = tmp_path / "ico.off"
+    save_mesh(shapes.icosphere(2), mesh_path)
+    page = tmp_path / "view.html"
+    assert main(["view", str(mesh_path), "-k", "4", "-o", str(page)]) == 0
+    text = page.read_text()
+    assert "psi4" in text and "<script src=" not in text
+    assert main(["view", str(mesh_path), "-o", str(tmp_path / "view.png")]) == 2  # wrong suffix

@@ -96,6 +96,12 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
+    view = commands.add_parser("view", help="an interactive HTML page of the first eigenfunctions (rotate, switch)")
+    view.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL; .gz too)")
+    view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions to show (default 10)")
+    view.add_argument("--potential", help=".npy or text file with one potential value per vertex")
+    view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
+
     reproduce = commands.add_parser(
         "reproduce", help="run every experiment of the paper and write report/index.html + results.json"
     )
@@ -344,6 +350,22 @@ def _match(args) -> None:
     print(f"wrote           {output}")
 
 
+def _view(args) -> None:
+    from hamsa.eigen import eigenbasis
+    from hamsa.io import load_mesh
+    from hamsa.viz import to_html
+
+    output = _output_path(args.output, ".html")
+    mesh = load_mesh(args.mesh)
+    potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+    basis = eigenbasis(mesh, args.k, potential)
+    fields = {} if potential is None else {"potential V": potential}
+    fields |= {f"psi{i + 1} (E = {value:.4g})": basis.vectors[:, i] for i, value in enumerate(basis.values)}
+    kind = "LBO" if potential is None else "Hamiltonian"
+    to_html(mesh, fields, output, cmap="RdBu", symmetric=potential is None, title=f"{Path(args.mesh).name}: {kind}")
+    print(f"wrote {output} ({len(fields)} fields; open it in a browser)")
+
+
 def _reproduce(args) -> None:
     from hamsa.reproduce import reproduce
 
@@ -393,6 +415,7 @@ def main(argv: list[str] | None = None) -> int:
         "decompress": _decompress,
         "modes": _modes,
         "match": _match,
+        "view": _view,
         "reproduce": _reproduce,
         "demo": _demo,
     }

@@ -94,6 +94,10 @@ def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> None:
         handle.write(data)
 
 
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
 @contextmanager
 def atomic_write(path: str | os.PathLike, mode: str = "wb"):
     """Open a temporary file beside ``path``; rename it onto ``path`` only if the block succeeds."""
@@ -105,6 +109,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb"):
     try:
         with os.fdopen(fd, mode) as handle:
             yield handle
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes it private; the output gets the usual permissions
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

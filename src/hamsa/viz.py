@@ -1,4 +1,4 @@
-"""Pictures of functions on meshes: a grid of off-screen renders with titles and colorbars (``[viz]`` extra).
+"""Pictures of functions on meshes: off-screen renders (pyvista) and interactive HTML pages (plotly); ``[viz]`` extra.
 
 Rendering uses pyvista (VTK) off screen; without a display it selects VTK's EGL window, which works
 headless with Debian's ``libegl1 libegl-mesa0 libgl1-mesa-dri``. Curves are left to matplotlib.
@@ -7,8 +7,6 @@ headless with Debian's ``libegl1 libegl-mesa0 libgl1-mesa-dri``. Curves are left
 from __future__ import annotations
 
 import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
@@ -138,16 +136,16 @@ def render_fields(
         else:
             getattr(plotter, f"view_{view}")()
         plotter.camera.zoom(zoom)
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
     try:
-        image = plotter.screenshot(tmp, return_img=True)
-        os.replace(tmp, path)
+        image = plotter.screenshot(None, return_img=True)
     finally:
         plotter.close()
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    from PIL import Image
+
+    from hamsa.io import atomic_write
+
+    with atomic_write(path, "wb") as handle:
+        Image.fromarray(image).save(handle, format="PNG")
     return image
 
 
@@ -174,3 +172,74 @@ def _is_pair(value) -> bool:
     return (
         len(value) == 2 and isinstance(value[0], np.ndarray) and isinstance(value[1], np.ndarray) and value[1].ndim == 2
     )
+
+
+def to_html(
+    mesh, fields, path, *, titles=None, cmap: str = "Viridis", symmetric: bool = False, title: str = ""
+) -> None:
+    """Write a self-contained interactive page: rotate / zoom the mesh, switch fields, read the colorbar.
+
+    The page embeds plotly.js (about 4 MB), so it opens offline and can be mailed; WebGL draws it.
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+    fields : (n,) array, a sequence of them, or a dict {name: (n,) array}; one button per field
+    path : str or Path of the .html file (written atomically)
+    titles : names of the fields (when ``fields`` is not a dict)
+    cmap : a plotly colorscale name ("Viridis", "RdBu", "Inferno", ...)
+    symmetric : color range symmetric about 0 (eigenfunctions)
+    title : the page's heading
+    """
+    try:
+        import plotly.graph_objects as go
+    except ImportError:
+        raise MissingDependencyError("interactive views need plotly: pip install 'hamsa[viz]'") from None
+    from hamsa.io import atomic_write
+
+    mesh = as_trimesh(mesh)
+    if isinstance(fields, dict):
+        titles, fields = list(fields), list(fields.values())
+    elif np.ndim(fields) == 1:
+        fields = [fields]
+    fields = [np.asarray(f, dtype=np.float64) for f in fields]
+    titles = [f"field {i}" for i in range(len(fields))] if titles is None else [str(t) for t in titles]
+    if not fields or len(titles) != len(fields):
+        raise HamsaError(f"{len(fields)} fields and {len(titles)} titles: give one title per field")
+    for name, field in zip(titles, fields):
+        if field.shape != (mesh.n_vertices,) or not np.all(np.isfinite(field)):
+            raise HamsaError(f"field '{name}' must be a finite ({mesh.n_vertices},) array, got shape {field.shape}")
+
+    def color_range(field):
+        if symmetric:
+            bound = float(np.abs(field).max()) or 1.0
+            return -bound, bound
+        low, high = float(field.min()), float(field.max())
+        return (low, high) if high > low else (low - 1.0, high + 1.0)
+
+    x, y, z = mesh.vertices.T
+    i, j, k = mesh.faces.T
+    low, high = color_range(fields[0])
+    figure = go.Figure(
+        go.Mesh3d(
+            x=x, y=y, z=z, i=i, j=j, k=k,
+            intensity=fields[0], intensitymode="vertex", colorscale=cmap, cmin=low, cmax=high,
+            colorbar={"title": {"text": titles[0]}}, flatshading=False,
+            lighting={"ambient": 0.5, "diffuse": 0.7, "specular": 0.1},
+        )
+    )  # fmt: skip
+    buttons = []
+    for name, field in zip(titles, fields):
+        low, high = color_range(field)
+        restyle = {"intensity": [field], "cmin": low, "cmax": high, "colorbar.title.text": name}
+        buttons.append({"label": name, "method": "restyle", "args": [restyle]})
+    figure.update_layout(
+        title=title,
+        scene={"aspectmode": "data", "xaxis": {"visible": False}, "yaxis": {"visible": False},
+               "zaxis": {"visible": False}, "camera": {"eye": {"x": 1.5, "y": 1.5, "z": 1.2}}},
+        updatemenus=[{"buttons": buttons, "direction": "down", "x": 0.0, "y": 1.0, "xanchor": "left"}]
+        if len(fields) > 1 else [],
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+    )  # fmt: skip
+    with atomic_write(path, "w") as handle:
+        handle.write(figure.to_html(include_plotlyjs=True, full_html=True))
