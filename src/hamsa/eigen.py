@@ -29,8 +29,6 @@ first entry of magnitude above 1e-3 of its largest is positive (deterministic fo
 
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,15 +133,50 @@ class Eigenbasis:
         if self.potential is not None:
             arrays["potential"] = self.potential
         arrays.update(extra or {})
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                np.savez(handle, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        from hamsa.io import atomic_write
+
+        with atomic_write(path, "wb") as handle:
+            np.savez(handle, **arrays)
+
+    def to_arrays(self) -> dict:
+        """Plain arrays: ``values`` (k,), ``vectors`` (n, k), ``mass`` (n,) lumped masses — or the sparse
+        (n, n) matrix for ``mass_kind == "full"`` — and ``potential`` (n,) or None. The convention is
+        pyFM's and LaPy's too: columns are eigenvectors, orthonormal in the mass inner product."""
+        lumped = self.mass_kind != "full"
+        mass = self.mass.diagonal().copy() if lumped else self.mass.copy()
+        return {"values": self.values.copy(), "vectors": self.vectors.copy(), "mass": mass, "potential": self.potential}
+
+    @classmethod
+    def from_arrays(cls, values, vectors, mass, potential=None, check: bool = True) -> Eigenbasis:
+        """An Eigenbasis from arrays computed elsewhere (e.g. by scipy's eigsh, pyFM or LaPy).
+
+        ``mass`` is the (n,) lumped masses or an (n, n) sparse matrix; with ``check`` the columns must be
+        mass-orthonormal to 1e-6 (normalize them first) and the values ascending.
+        """
+        values = np.asarray(values, dtype=np.float64)
+        vectors = np.asarray(vectors, dtype=np.float64)
+        if vectors.ndim != 2 or values.shape != (vectors.shape[1],):
+            raise HamsaError(f"values {values.shape} and vectors {vectors.shape} must be (k,) and (n, k)")
+        n = vectors.shape[0]
+        if sp.issparse(mass):
+            matrix, kind = sp.csr_matrix(mass, dtype=np.float64), "full"
+        else:
+            matrix, kind = sp.diags(np.asarray(mass, dtype=np.float64)).tocsr(), "voronoi"
+        if matrix.shape != (n, n):
+            raise HamsaError(f"mass must be ({n},) or ({n}, {n}), got shape {np.shape(mass)}")
+        if potential is not None:
+            potential = np.asarray(potential, dtype=np.float64)
+            if potential.shape != (n,):
+                raise HamsaError(f"potential must be ({n},), got {potential.shape}")
+        if check:
+            if not np.all(np.isfinite(values)) or not np.all(np.isfinite(vectors)):
+                raise HamsaError("values and vectors must be finite")
+            if np.any(np.diff(values) < 0):
+                raise HamsaError("values must be ascending (sort the pairs first)")
+            error = np.abs(vectors.T @ (matrix @ vectors) - np.eye(values.size)).max()
+            if error > 1e-6:
+                raise HamsaError(f"the vectors are not mass-orthonormal (max |Psi^T A Psi - I| = {error:.1e})")
+        return cls(values, vectors, matrix, potential, kind, SolveInfo(method="arrays"))
 
     @classmethod
     def load(cls, path) -> Eigenbasis:

@@ -228,12 +228,27 @@ class TriMesh:
 
 
 def as_trimesh(mesh_like) -> TriMesh:
-    """Accept a :class:`TriMesh` or a ``(vertices, faces)`` pair and return a TriMesh."""
+    """Accept the meshes users have and return a validated :class:`TriMesh` (vertex order kept).
+
+    Accepted: a TriMesh; a ``(vertices, faces)`` pair of arrays; a ``trimesh.Trimesh`` (its arrays as
+    they are — load with ``process=False`` so trimesh does not merge or reorder vertices); a
+    ``pyvista.PolyData`` made of triangles only (``.triangulate()`` it first otherwise).
+    """
     if isinstance(mesh_like, TriMesh):
         return mesh_like
     if isinstance(mesh_like, (tuple, list)) and len(mesh_like) == 2:
         return TriMesh(*mesh_like)
-    raise MeshError(f"expected a TriMesh or a (vertices, faces) pair, got {type(mesh_like).__name__}")
+    kind = f"{type(mesh_like).__module__.split('.')[0]}.{type(mesh_like).__name__}"
+    if kind == "trimesh.Trimesh":
+        return TriMesh(np.asarray(mesh_like.vertices), np.asarray(mesh_like.faces))
+    if kind == "pyvista.PolyData":
+        cells = np.asarray(mesh_like.faces)
+        if cells.size % 4 or not np.all(cells.reshape(-1, 4)[:, 0] == 3):
+            raise MeshError("the PolyData has non-triangle faces: call .triangulate() first")
+        return TriMesh(np.asarray(mesh_like.points), cells.reshape(-1, 4)[:, 1:])
+    raise MeshError(
+        f"expected a TriMesh, a (vertices, faces) pair, a trimesh.Trimesh or a pyvista.PolyData, got {kind}"
+    )
 
 
 # ----------------------------------------------------------------------------------- helpers
