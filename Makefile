@@ -3,13 +3,13 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench lint docs clean
 
 # The main job: every experiment of the paper on built-in shapes, as report/index.html (+ results.json).
 demo: $(VENV)/.fast $(VENV)/.viz
 	$(BIN)/hamsa reproduce --quick -o report
 
-test: $(VENV)/.fast $(VENV)/.viz $(VENV)/.test
+test: $(VENV)/.fast $(VENV)/.viz $(VENV)/.test $(VENV)/.docs
 	$(BIN)/python -m pytest
 
 bench: $(VENV)/.fast $(VENV)/.test
@@ -18,6 +18,15 @@ bench: $(VENV)/.fast $(VENV)/.test
 lint: $(VENV)/.test
 	$(BIN)/python -m ruff check src tests benchmarks
 	$(BIN)/python -m ruff format --check src tests benchmarks
+
+# The documentation site (mkdocs + mkdocstrings, API pages from the docstrings); warnings are errors.
+docs: $(VENV)/.docs
+	$(BIN)/mkdocs build --strict --quiet
+	@echo "docs: $(CURDIR)/site/index.html"
+
+$(VENV)/.docs: $(VENV)/.core
+	$(BIN)/pip install -q -e ".[docs]"
+	touch $@
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -42,4 +51,4 @@ $(VENV)/.viz: $(VENV)/.core
 	touch $@
 
 clean:
-	rm -rf $(VENV) build src/*.egg-info .pytest_cache
+	rm -rf $(VENV) build site src/*.egg-info .pytest_cache

@@ -60,3 +60,17 @@ def test_curve_thresholds_and_bad_inputs(body):
     with pytest.raises(HamsaError, match="integers"):
         geodesic_errors(body, [0, body.n_vertices], [0, 1])
     assert sample_points(10, 50).tolist() == list(range(10))
+
+
+def test_truth_distances_equal_geodesic_errors_for_every_map():
+    from hamsa.evaluation import TruthDistances
+
+    mesh = shapes.sphere(800)
+    rng = np.random.default_rng(2)
+    truth = rng.integers(0, mesh.n_vertices, 100)
+    table = TruthDistances(mesh, truth, batch=16)
+    for _ in range(3):
+        predicted = rng.integers(0, mesh.n_vertices, 100)
+        np.testing.assert_allclose(table.errors(predicted), geodesic_errors(mesh, predicted, truth), rtol=1e-12)
+    with pytest.raises(HamsaError, match="predicted"):
+        table.errors(predicted[:5])

@@ -164,3 +164,14 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
     _, mapping = zoomout(initial, *bases, sizes=range(20, 61, 2))
     points = sample_points(source.n_vertices, 1000)
     assert summary(geodesic_errors(target, mapping[points], points))["mean_error"] < 0.05  # measured 0.038
+
+
+@pytest.mark.parametrize("dimension", [3, 40])
+def test_nearest_rows_equals_a_kd_tree(dimension):
+    from scipy.spatial import cKDTree
+
+    from hamsa.matching import nearest_rows
+
+    rng = np.random.default_rng(dimension)
+    points, queries = rng.standard_normal((700, dimension)), rng.standard_normal((3000, dimension))
+    np.testing.assert_array_equal(nearest_rows(queries, points, chunk=512), cKDTree(points).query(queries)[1])

@@ -59,6 +59,37 @@ def geodesic_errors(
     return errors / np.sqrt(target.area)
 
 
+class TruthDistances:
+    """Geodesic distances on the target from the true images of the evaluated points, computed once.
+
+    Comparing several predicted maps for the same points (methods, bases) costs one heat-method solve
+    per true image instead of one per map: ``TruthDistances(target, truth).errors(predicted)`` equals
+    ``geodesic_errors(target, predicted, truth)``. Memory: an (n_target, distinct true images) table.
+    """
+
+    def __init__(self, target, ground_truth, solver: GeodesicSolver | None = None, batch: int = 64):
+        self.target = as_trimesh(target)
+        self.truth = np.asarray(ground_truth)
+        n = self.target.n_vertices
+        if self.truth.ndim != 1 or (
+            self.truth.size and (not np.issubdtype(self.truth.dtype, np.integer) or self.truth.min() < 0
+                                 or self.truth.max() >= n)
+        ):  # fmt: skip
+            raise HamsaError(f"ground truth must be a 1-D array of target vertex ids in [0, {n})")
+        unique, self._column = np.unique(self.truth, return_inverse=True)
+        solver = solver or GeodesicSolver(self.target)
+        self._table = np.hstack([solver.distances_from(unique[s : s + batch]) for s in range(0, len(unique), batch)])
+
+    def errors(self, predicted) -> np.ndarray:
+        """(s,) normalized errors of a predicted map (target vertex ids of the same s points)."""
+        predicted = np.asarray(predicted)
+        if predicted.shape != self.truth.shape or not np.issubdtype(predicted.dtype, np.integer):
+            raise HamsaError(f"predicted must be {self.truth.shape} integer target ids, got {predicted.shape}")
+        if predicted.size and (predicted.min() < 0 or predicted.max() >= self.target.n_vertices):
+            raise HamsaError(f"predicted ids must be in [0, {self.target.n_vertices}) (target vertices)")
+        return self._table[predicted, self._column] / np.sqrt(self.target.area)
+
+
 def _distances(solver: GeodesicSolver, predicted: np.ndarray, truth: np.ndarray, batch: int) -> np.ndarray:
     out = np.empty(len(truth))
     unique, inverse = np.unique(truth, return_inverse=True)

@@ -18,6 +18,27 @@ from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
 
 
+def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int | None = None) -> np.ndarray:
+    """For each row of ``queries`` (q, d), the index of the nearest row of ``points`` (p, d) (Euclidean).
+
+    A k-d tree for d <= 8; above that k-d trees degrade to scanning everything, so the distances
+    ``|x|^2 - 2 x.y + |y|^2`` are computed in blocks by matrix products (BLAS-3).
+    """
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    if queries.ndim != 2 or points.ndim != 2 or queries.shape[1] != points.shape[1]:
+        raise HamsaError(f"need (q, d) and (p, d) arrays with the same d, got {queries.shape} and {points.shape}")
+    if queries.shape[1] <= 8:
+        return cKDTree(points).query(queries)[1].astype(np.int64)
+    squared = np.einsum("ij,ij->i", points, points)
+    chunk = chunk or max(1, 2**21 // len(points))  # blocks of about 16 MB stay in cache-friendly sizes
+    nearest = np.empty(len(queries), dtype=np.int64)
+    for start in range(0, len(queries), chunk):
+        block = queries[start : start + chunk]
+        nearest[start : start + chunk] = np.argmin(squared[None, :] - 2.0 * (block @ points.T), axis=1)
+    return nearest
+
+
 def match_descriptors(source_descriptors, target_descriptors) -> np.ndarray:
     """``map_source_to_target``: the nearest target vertex in descriptor space, for each source vertex.
 
@@ -30,7 +51,7 @@ def match_descriptors(source_descriptors, target_descriptors) -> np.ndarray:
         raise HamsaError(f"descriptors must be (n, d) with the same d, got {F.shape} and {G.shape}")
     scale = np.sqrt(np.mean(np.vstack([F, G]) ** 2, axis=0))
     scale[scale == 0] = 1.0
-    return cKDTree(G / scale).query(F / scale)[1].astype(np.int64)
+    return nearest_rows(F / scale, G / scale)
 
 
 def functional_map(
@@ -60,7 +81,7 @@ def map_from_functional(C: np.ndarray, source: Eigenbasis, target: Eigenbasis) -
     C = np.asarray(C)
     if C.shape != (source.k, target.k):
         raise HamsaError(f"C has shape {C.shape}, expected ({source.k}, {target.k})")
-    return cKDTree(target.vectors).query(source.vectors @ C)[1].astype(np.int64)
+    return nearest_rows(source.vectors @ C, target.vectors)
 
 
 def functional_from_map(map_source_to_target, source: Eigenbasis, target: Eigenbasis) -> np.ndarray:
@@ -114,7 +135,9 @@ def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=
     sizes : increasing basis sizes (default every integer from min(10, k) to k = min(k_s, k_t); starting
         much smaller collapses the map: a 4-dimensional embedding cannot tell most vertices apart)
 
-    Returns (C, map_source_to_target) at the largest size.
+    Returns
+    -------
+    (C, map_source_to_target) at the largest size.
     """
     top = min(source.k, target.k)
     sizes = list(range(min(10, top), top + 1)) if sizes is None else [int(s) for s in sizes]

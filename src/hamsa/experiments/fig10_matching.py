@@ -28,8 +28,7 @@ import numpy as np
 import hamsa
 from hamsa import potentials, shapes
 from hamsa.diffusion import default_hks_times, default_wks_energies, heat_kernel_signature, wave_kernel_signature
-from hamsa.evaluation import THRESHOLDS, error_curve, geodesic_errors, sample_points, summary
-from hamsa.geodesic import GeodesicSolver
+from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
 from hamsa.matching import (
     functional_from_map,
     functional_map,
@@ -77,7 +76,7 @@ def _match(method: str, source, target) -> np.ndarray:
         *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
     )
     _, initial = icp_refine(C, *small)
-    return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 2))[1]
+    return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
 
 
 def _bases(source, target, k: int):
@@ -110,12 +109,12 @@ def run(args) -> dict:
     fmaps = None
     for source_name, target_name, source, target in pairs:
         points = sample_points(source.n_vertices, 1000)
-        solver = GeodesicSolver(target)
+        truth = TruthDistances(target, points)  # identity ground truth
         bases = _bases(source, target, k)
         for basis in BASES:
             for method in METHODS:
                 mapping = _match(method, *bases[basis])
-                errors = geodesic_errors(target, mapping[points], points, solver=solver)
+                errors = truth.errors(mapping[points])
                 results[method][basis].append(summary(errors))
                 curves[method][basis].append(error_curve(errors))
                 rows.append(
