@@ -1,13 +1,16 @@
 """Feed hamsa hostile inputs through the CLI and the Python API and count how each one ends.
 
-The corpus is generated here (no data files). Every CLI case runs ``hamsa info FILE`` and
-``hamsa basis FILE -k 4 -o OUT.npz`` in a subprocess with a timeout; an outcome is
-"accepted" (exit 0, for odd but valid meshes), a "clear error" (exit 2, exactly one line on stderr,
-no traceback), a "traceback" (anything else), a "hang" (timeout) or leaves a "partial file" (an output
-or temporary file after a failure). API cases must raise a HamsaError subclass (or succeed when the
-input is valid). Prints one line per case and the summary line
+The corpus is generated here (no data files). Every file goes through ``hamsa basis FILE -k 4 -o OUT.npz``
+in a subprocess with a timeout; an outcome is a "clear error" (exit 2, exactly one line on stderr, no
+traceback), "accepted" (exit 0: the input was not hostile after all — a defect of the corpus or of
+hamsa), a "traceback" (anything else), a "hang" (timeout) or a "partial file" (an output or temporary
+file left after a failure). API cases must raise a HamsaError subclass. The bar is every case a clear
+error. Separately, the defects with one right fix must be repaired by ``--repair`` (exit 0), and
+``hamsa info`` must describe (exit 0) or refuse clearly (exit 2) every file. Prints one line per case
+and the summary lines
 
-    N cases, E clear errors, A accepted, 0 tracebacks, 0 hangs, 0 partial files
+    N cases, N clear errors, 0 accepted, 0 tracebacks, 0 hangs, 0 partial files
+    R repairable cases, R repaired by --repair; I info runs, 0 tracebacks
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ def mesh_files() -> dict[str, bytes]:
         b"property list uchar int vertex_indices\nend_header\n\x00\x00\x80",
         "not_gzip.off.gz": b"plain text, not gzip",
         "unknown.xyz": b"1 2 3\n",
-        # odd but valid: accepted by info; basis answers or refuses clearly
+        # repairable with --repair (REPAIRABLE below); refused without it
         "needle.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0.5 1e-9 0\n3 0 1 2\n",
         "single_triangle.off": TRIANGLE.encode(),
         "isolated_vertex.off": off(lines + ["9 9 9"], faces).encode(),
@@ -75,6 +78,16 @@ def mesh_files() -> dict[str, bytes]:
         "nonmanifold_vertex.off": b"OFF\n7 6 0\n0 0 0\n1 0 0\n0 1 0\n1 1 1\n-1 0 0\n0 -1 0\n-1 -1 -1\n"
         b"3 0 1 2\n3 0 2 3\n3 0 3 1\n3 0 4 5\n3 0 5 6\n3 0 6 4\n",
     }
+
+
+REPAIRABLE = (
+    "duplicate_faces.off",
+    "repeated_vertex.off",
+    "isolated_vertex.off",
+    "two_pieces.off",
+    "inconsistent_orientation.off",
+    "nonmanifold_vertex.off",
+)
 
 
 def run_cli(args: list[str], folder: Path) -> tuple[str, str]:
@@ -130,17 +143,23 @@ def api_cases() -> dict[str, callable]:
 
 def main() -> int:
     counts = {"clear error": 0, "accepted": 0, "traceback": 0, "hang": 0, "partial file": 0}
-    cases = 0
+    cases = repaired = info_runs = info_tracebacks = 0
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for name, content in mesh_files().items():
             path = folder / name
             path.write_bytes(content)
-            for command in (["info", str(path)], ["basis", str(path), "-k", "4"]):
-                outcome, detail = run_cli(command, folder)
-                counts[outcome] += 1
-                cases += 1
-                print(f"cli {command[0]:<5} {name:<28} {outcome:<12} {detail}")
+            outcome, detail = run_cli(["basis", str(path), "-k", "4"], folder)
+            counts[outcome] += 1
+            cases += 1
+            print(f"cli basis   {name:<28} {outcome:<12} {detail}")
+            info, detail = run_cli(["info", str(path)], folder)
+            info_runs += 1
+            info_tracebacks += info not in ("clear error", "accepted")
+            if name in REPAIRABLE:
+                fixed, detail = run_cli(["basis", str(path), "-k", "2", "--repair"], folder)
+                repaired += fixed == "accepted"
+                print(f"cli repair  {name:<28} {'repaired' if fixed == 'accepted' else fixed:<12} {detail}")
     for name, case in api_cases().items():
         cases += 1
         try:
@@ -151,12 +170,15 @@ def main() -> int:
         except Exception as exc:  # what the corpus is here to find
             outcome, detail = "traceback", f"{type(exc).__name__}: {exc}"
         counts[outcome] += 1
-        print(f"api       {name:<28} {outcome:<12} {detail[:150]}")
+        print(f"api         {name:<28} {outcome:<12} {detail[:150]}")
     print(
         f"{cases} cases, {counts['clear error']} clear errors, {counts['accepted']} accepted, "
         f"{counts['traceback']} tracebacks, {counts['hang']} hangs, {counts['partial file']} partial files"
     )
-    return 0 if counts["traceback"] == counts["hang"] == counts["partial file"] == 0 else 1
+    print(f"{len(REPAIRABLE)} repairable cases, {repaired} repaired by --repair; {info_runs} info runs, "
+          f"{info_tracebacks} tracebacks")  # fmt: skip
+    bad = counts["traceback"] + counts["hang"] + counts["partial file"] + counts["accepted"] + info_tracebacks
+    return 0 if bad == 0 and repaired == len(REPAIRABLE) else 1
 
 
 if __name__ == "__main__":

@@ -119,3 +119,10 @@ def test_full_potential_mass_matrix_integrates_exactly():
 def test_potential_errors(bad, message):
     with pytest.raises(PotentialError, match=message):
         hamiltonian(_perturbed(), bad)
+
+
+def test_absurd_potential_magnitudes_are_refused_not_silently_rounded():
+    mesh = shapes.icosphere(2)
+    with pytest.raises(PotentialError, match="round-off"):
+        hamiltonian(mesh, np.full(mesh.n_vertices, 1e300))
+    hamiltonian(mesh, np.full(mesh.n_vertices, 1e6))  # an 'infinite wall' far above the spectrum is fine

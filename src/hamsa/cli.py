@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hamsa import __version__
-from hamsa.errors import HamsaError
+from hamsa.errors import HamsaError, MeshError
 
 EXIT_BAD_INPUT = 2
 
@@ -28,6 +28,45 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
     return value
+
+
+REPAIR_HELP = (
+    "fix what has one right fix (duplicate or degenerate faces, non-manifold vertices, orientation, unreferenced "
+    "vertices) and keep the largest connected component, instead of refusing the mesh"
+)
+
+
+def _load_for_operators(path: str, repair: bool):
+    """A mesh fit for spectral work, or a MeshError naming the defect and the --repair fix."""
+    from hamsa.io import load_mesh
+
+    if repair:
+        from hamsa.io import read_mesh_arrays
+        from hamsa.repair import repair_mesh
+
+        mesh, _, report = repair_mesh(*read_mesh_arrays(path), keep="largest")
+        if report.changed:
+            print(f"{path}: {report}")
+        return mesh
+    mesh = load_mesh(path)
+    hint = "(--repair fixes it)"
+    if len(mesh.unreferenced_vertices):
+        raise MeshError(f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices {hint}")
+    if mesh.non_manifold_vertices.size:
+        raise MeshError(
+            f"'{path}' has {mesh.non_manifold_vertices.size} non-manifold vertices (first: "
+            f"{int(mesh.non_manifold_vertices[0])}; separate fans of faces meet there) {hint}"
+        )
+    if not mesh.is_consistently_oriented:
+        raise MeshError(f"'{path}': faces are not consistently oriented {hint}")
+    count, labels = mesh.vertex_components
+    if count > 1:
+        sizes = np.bincount(labels[labels >= 0])
+        raise MeshError(
+            f"'{path}' has {count} disconnected pieces ({', '.join(map(str, sizes[:5]))} vertices); --repair keeps "
+            "the largest, the Python API handles several"
+        )
+    return mesh
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -43,6 +82,7 @@ def _parser() -> argparse.ArgumentParser:
 
     basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
     basis.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    basis.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     basis.add_argument("-k", type=_positive_int, required=True, help="number of eigenpairs")
     basis.add_argument("--potential", help="potential V: .npy, or a text file with one value per vertex")
     basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
@@ -53,6 +93,7 @@ def _parser() -> argparse.ArgumentParser:
         "optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)"
     )
     optimize.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    optimize.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     optimize.add_argument("-k", type=_positive_int, required=True, help="number of eigenvectors")
     optimize.add_argument("--data", help="(n,) or (n, d) .npy to represent (default: the vertex coordinates)")
     optimize.add_argument(
@@ -64,6 +105,7 @@ def _parser() -> argparse.ArgumentParser:
 
     compress = commands.add_parser("compress", help="spectral geometry compression (Karni-Gotsman / Hamiltonian)")
     compress.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    compress.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     compress.add_argument("-o", "--output", required=True, help="output .hmz")
     compress.add_argument("--coeffs", type=_positive_int, required=True, help="coefficients per coordinate")
     compress.add_argument("--bits", type=_positive_int, default=12, help="bits per coefficient (default 12)")
@@ -78,6 +120,7 @@ def _parser() -> argparse.ArgumentParser:
 
     modes = commands.add_parser("modes", help="compressed manifold modes by IRLS Hamiltonian eigenproblems (paper 4)")
     modes.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    modes.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     modes.add_argument("-K", type=_positive_int, required=True, help="number of modes")
     modes.add_argument("--mu", type=float, required=True, help="L1 weight (for a unit-area mesh, 10-500)")
     modes.add_argument("--method", choices=("hamiltonian", "admm"), default="hamiltonian")
@@ -98,6 +141,7 @@ def _parser() -> argparse.ArgumentParser:
 
     view = commands.add_parser("view", help="an interactive HTML page of the first eigenfunctions (rotate, switch)")
     view.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL; .gz too)")
+    view.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions to show (default 10)")
     view.add_argument("--potential", help=".npy or text file with one potential value per vertex")
     view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
@@ -182,11 +226,10 @@ def _info(args) -> None:
 
 def _basis(args) -> None:
     from hamsa.eigen import eigenbasis
-    from hamsa.io import load_mesh
 
     output = _output_path(args.output, ".npz")
     start = time.perf_counter()
-    mesh = load_mesh(args.mesh)
+    mesh = _load_for_operators(args.mesh, args.repair)
     loaded = time.perf_counter()
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
     basis = eigenbasis(mesh, args.k, potential, mass=args.mass, backend=args.backend)
@@ -205,11 +248,11 @@ def _basis(args) -> None:
 
 
 def _optimize(args) -> None:
-    from hamsa.io import atomic_write, load_mesh
+    from hamsa.io import atomic_write
     from hamsa.optimize import optimize_potential
 
     output = _output_path(args.output, ".npy")
-    mesh = load_mesh(args.mesh)
+    mesh = _load_for_operators(args.mesh, args.repair)
     if args.data:
         try:
             data = np.load(args.data, allow_pickle=False)
@@ -242,10 +285,10 @@ def _optimize(args) -> None:
 
 def _compress(args) -> None:
     from hamsa import compression
-    from hamsa.io import atomic_write, load_mesh
+    from hamsa.io import atomic_write
 
     _output_path(args.output)
-    mesh = load_mesh(args.mesh)
+    mesh = _load_for_operators(args.mesh, args.repair)
     start = time.perf_counter()
     data = compression.encode(mesh, args.coeffs, args.bits, args.method)
     with atomic_write(args.output) as handle:
@@ -286,11 +329,11 @@ def _decompress(args) -> None:
 
 def _modes(args) -> None:
     from hamsa.cmm import compressed_modes
-    from hamsa.io import atomic_write, load_mesh
+    from hamsa.io import atomic_write
     from hamsa.mesh import TriMesh
 
     output = _output_path(args.output, ".npz")
-    mesh = load_mesh(args.mesh)
+    mesh = _load_for_operators(args.mesh, args.repair)
     if args.unit_area:
         mesh = TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)
 
@@ -352,11 +395,10 @@ def _match(args) -> None:
 
 def _view(args) -> None:
     from hamsa.eigen import eigenbasis
-    from hamsa.io import load_mesh
     from hamsa.viz import to_html
 
     output = _output_path(args.output, ".html")
-    mesh = load_mesh(args.mesh)
+    mesh = _load_for_operators(args.mesh, args.repair)
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
     basis = eigenbasis(mesh, args.k, potential)
     fields = {} if potential is None else {"potential V": potential}

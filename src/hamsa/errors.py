@@ -26,3 +26,7 @@ class SolverError(HamsaError):
 
 class MissingDependencyError(HamsaError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
+
+
+class RepairWarning(UserWarning):
+    """A mesh was changed by an explicit ``repair=True`` request; the message says what changed."""

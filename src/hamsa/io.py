@@ -13,12 +13,13 @@ import gzip
 import os
 import struct
 import tempfile
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from hamsa.errors import MeshError
+from hamsa.errors import MeshError, RepairWarning
 from hamsa.mesh import TriMesh
 
 FORMATS = ("off", "obj", "ply", "stl")
@@ -36,13 +37,18 @@ def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
     return fmt, gzipped
 
 
-def load_mesh(path: str | os.PathLike) -> TriMesh:
+def load_mesh(path: str | os.PathLike, repair: bool = False) -> TriMesh:
     """Read a triangle mesh from an OFF, OBJ, PLY or STL file (``*.gz`` is decompressed on the fly).
 
     Parameters
     ----------
     path : str or path-like
         The file; its suffix selects the format.
+    repair : bool
+        Apply the well-defined repairs of :mod:`hamsa.repair` (duplicate and degenerate faces,
+        non-manifold vertices, orientation, unreferenced vertices) instead of refusing such a mesh;
+        a :class:`~hamsa.errors.RepairWarning` says what changed. Use
+        :func:`hamsa.repair.repair_mesh` directly to get the index map.
 
     Returns
     -------
@@ -54,6 +60,26 @@ def load_mesh(path: str | os.PathLike) -> TriMesh:
     MeshError
         If the file is missing or unreadable, is not a valid file of its format, has non-triangle
         faces, or describes an invalid mesh (see :class:`TriMesh`). The message names the file.
+    """
+    try:
+        vertices, faces = read_mesh_arrays(path)
+        if not repair:
+            return TriMesh(vertices, faces)
+        from hamsa.repair import repair_mesh
+
+        mesh, _, report = repair_mesh(vertices, faces)
+    except MeshError as exc:
+        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
+    if report.changed:
+        warnings.warn(f"'{path}': {report}", RepairWarning, stacklevel=2)
+    return mesh
+
+
+def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """The raw ``(vertices (n, 3) float64, faces (m, 3) int64)`` of a mesh file, before any validation.
+
+    For inspecting or repairing a mesh that :func:`load_mesh` refuses. Raises MeshError if the file
+    cannot be read or parsed as its format.
     """
     fmt, gzipped = mesh_format(path)
     try:
@@ -71,8 +97,7 @@ def load_mesh(path: str | os.PathLike) -> TriMesh:
         raise MeshError(f"cannot read '{path}': the file is empty")
     reader = {"off": _read_off, "obj": _read_obj, "ply": _read_ply, "stl": _read_stl}[fmt]
     try:
-        vertices, faces = reader(data)
-        return TriMesh(vertices, faces)
+        return reader(data)
     except MeshError as exc:
         raise MeshError(f"'{path}': {exc}") from None
     except (ValueError, IndexError, struct.error, UnicodeDecodeError) as exc:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from hamsa.errors import PotentialError
+from hamsa.errors import HamsaError, PotentialError
 from hamsa.mesh import TriMesh, as_trimesh
 
 MASS_KINDS = ("voronoi", "barycentric", "full")
@@ -102,7 +102,7 @@ def vertex_areas(mesh, kind: str = "voronoi") -> np.ndarray:
             voronoi,
         )
     else:
-        raise ValueError(f"lumped mass kind must be 'voronoi' or 'barycentric', got {kind!r}")
+        raise HamsaError(f"lumped mass kind must be 'voronoi' or 'barycentric', got {kind!r}")
     return np.bincount(mesh.faces.ravel(), weights=corner_area.ravel(), minlength=mesh.n_vertices)
 
 
@@ -124,7 +124,7 @@ def mass_matrix(mesh, kind: str = "voronoi") -> sp.csr_matrix:
         For every kind, ``ones @ A @ ones`` equals the surface area.
     """
     if kind not in MASS_KINDS:
-        raise ValueError(f"mass kind must be one of {MASS_KINDS}, got {kind!r}")
+        raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {kind!r}")
     mesh = as_trimesh(mesh)
     if kind == "full":
         return potential_mass_matrix(mesh, np.ones(mesh.n_vertices), kind="full")
@@ -162,6 +162,10 @@ def potential_mass_matrix(mesh, potential: np.ndarray, kind: str = "voronoi") ->
     matrix.sum_duplicates()
     matrix.sort_indices()
     return matrix
+
+
+MAX_POTENTIAL_RATIO = 1e12
+"""Largest |V| accepted, relative to the mesh's largest Laplacian eigenvalue (float64 keeps ~16 digits)."""
 
 
 def check_potential(potential, n: int) -> np.ndarray:
@@ -202,13 +206,20 @@ def hamiltonian(mesh, potential=None, mass: str = "voronoi") -> tuple[sp.csr_mat
     """
     mesh = as_trimesh(mesh)
     if mass not in MASS_KINDS:
-        raise ValueError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
+        raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
     mesh.require_operator_ready()
     stiffness = stiffness_matrix(mesh)
     mass_mat = mass_matrix(mesh, mass)
     if potential is None:
         return stiffness, mass_mat
     potential = check_potential(potential, mesh.n_vertices)
+    spectrum_scale = float(np.max(stiffness.diagonal() / mass_mat.diagonal()))  # about the largest eigenvalue
+    if np.abs(potential).max() > MAX_POTENTIAL_RATIO * spectrum_scale:
+        raise PotentialError(
+            f"potential reaches {np.abs(potential).max():.3g}, more than {MAX_POTENTIAL_RATIO:.0e} times the "
+            f"mesh's largest Laplacian eigenvalue (about {spectrum_scale:.3g}): in float64 the Laplacian would "
+            "vanish in round-off; rescale V (an 'infinite wall' works as well at 1e6 times the eigenvalues of interest)"
+        )
     if mass == "full":
         term = potential_mass_matrix(mesh, potential, "full")
     else:

@@ -1,0 +1,195 @@
+"""Repairs with one right answer: what ``load_mesh(..., repair=True)`` and ``hamsa ... --repair`` do.
+
+By default hamsa refuses defective meshes with a :class:`~hamsa.errors.MeshError` naming the defect.
+Some defects have a well-defined fix that changes nothing a user could want kept:
+
+* faces that repeat a vertex (zero area, no contribution to any operator) are dropped;
+* duplicate faces (the same three vertices) are dropped, keeping the first;
+* non-manifold vertices (several fans of faces meeting at one vertex, like two cones tip to tip) are
+  split: each extra fan gets its own copy of the vertex;
+* inconsistent orientation is fixed per connected component (faces flipped to agree with the
+  component's first face), and closed components are turned outward (positive signed volume);
+* unreferenced vertices are dropped;
+* optionally (``keep="largest"``), only the largest connected component (by area) is kept.
+
+What has no single right answer is still refused: non-finite or huge coordinates, indices out of
+range, zero-area faces with distinct vertices, non-manifold edges, non-orientable surfaces.
+Vertex indices change only by removal and appending: ``kept[i]`` is the original index of new
+vertex i, so ground-truth correspondences can be carried over.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+from hamsa.errors import MeshError
+from hamsa.mesh import TriMesh
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    """What :func:`repair_mesh` changed (all zeros: the mesh was already clean)."""
+
+    degenerate_faces: int = 0
+    duplicate_faces: int = 0
+    split_vertices: int = 0
+    flipped_faces: int = 0
+    dropped_components: int = 0
+    unreferenced_vertices: int = 0
+
+    @property
+    def changed(self) -> bool:
+        return any(getattr(self, name) for name in self.__dataclass_fields__)
+
+    def __str__(self) -> str:
+        parts = [f"{value} {name.replace('_', ' ')}" for name, value in vars(self).items() if value]
+        return "repaired: " + ", ".join(parts) if parts else "nothing to repair"
+
+
+def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray, RepairReport]:
+    """Apply the well-defined repairs listed in the module docstring.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array, faces : (m, 3) integer array (0-based)
+    keep : "all" components, or "largest" (by area)
+
+    Returns
+    -------
+    (mesh, kept, report): the repaired TriMesh, ``kept`` (n',) original index of each new vertex, and a
+    :class:`RepairReport`. Raises MeshError for defects without a single right fix.
+    """
+    if keep not in ("all", "largest"):
+        raise MeshError(f"keep must be 'all' or 'largest', got {keep!r}")
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+        raise MeshError(f"need (n, 3) vertices and (m, 3) faces, got {vertices.shape} and {faces.shape}")
+    if not np.issubdtype(faces.dtype, np.integer) or (faces.size and (faces.min() < 0 or faces.max() >= len(vertices))):
+        raise MeshError(f"face indices must be integers in [0, {len(vertices)})")
+    faces = faces.astype(np.int64)
+    counts = {}
+
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    faces, counts["degenerate_faces"] = faces[~repeated], int(repeated.sum())
+    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    counts["duplicate_faces"] = len(faces) - len(first)
+    faces = faces[np.sort(first)]
+    if len(faces) == 0:
+        raise MeshError("no faces left after dropping degenerate and duplicate faces")
+
+    kept = np.arange(len(vertices))
+    faces, kept, counts["split_vertices"] = _split_non_manifold_vertices(faces, kept)
+    vertices = vertices[kept]
+    faces, counts["flipped_faces"] = _orient(vertices, faces)
+    faces, counts["dropped_components"] = _keep_components(vertices, faces, keep)
+
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    counts["unreferenced_vertices"] = int((~used[: len(used)]).sum())
+    new_index = np.cumsum(used) - 1
+    mesh = TriMesh(vertices[used], new_index[faces])
+    return mesh, kept[used], RepairReport(**counts)
+
+
+def _face_graph(faces: np.ndarray):
+    """Interior edges as (face a, face b, same_direction) triples, for edges shared by exactly two faces."""
+    m = len(faces)
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    owner = np.tile(np.arange(m), 3)
+    key = np.sort(directed, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, directed, owner = key[order], directed[order], owner[order]
+    same_as_next = np.all(key[1:] == key[:-1], axis=1)
+    start = np.flatnonzero(same_as_next)
+    if np.any(same_as_next[1:] & same_as_next[:-1]):
+        raise MeshError("an edge is shared by more than two faces (non-manifold edge): no well-defined repair")
+    same_direction = directed[start, 0] == directed[start + 1, 0]
+    return owner[start], owner[start + 1], same_direction
+
+
+def _split_non_manifold_vertices(faces: np.ndarray, kept: np.ndarray):
+    """Give each extra fan of faces around a vertex its own copy of the vertex."""
+    m = len(faces)
+    # corners (face, vertex); two corners of one vertex are joined when their faces share an edge at it
+    corner_vertex = faces.ravel()
+    a, b, _ = _face_graph(faces)
+    links_a, links_b = [], []
+    for i in range(3):
+        for j in range(3):
+            shared = faces[a, i] == faces[b, j]
+            links_a.append(3 * a[shared] + i)
+            links_b.append(3 * b[shared] + j)
+    links_a, links_b = np.concatenate(links_a), np.concatenate(links_b)
+    graph = sp.coo_matrix((np.ones(len(links_a)), (links_a, links_b)), shape=(3 * m, 3 * m))
+    _, fan = connected_components(graph, directed=False)
+    # the first fan of each vertex keeps it; every other fan gets a new vertex
+    pairs = np.unique(np.stack([corner_vertex, fan], axis=1), axis=0)
+    first_fan = np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]
+    extra = pairs[~first_fan]
+    if len(extra) == 0:
+        return faces, kept, 0
+    new_ids = len(kept) + np.arange(len(extra))
+    lookup = {(int(v), int(f)): int(new) for (v, f), new in zip(extra, new_ids)}
+    flat = faces.ravel().copy()
+    for c in np.flatnonzero(np.isin(fan, extra[:, 1])):
+        flat[c] = lookup.get((int(corner_vertex[c]), int(fan[c])), flat[c])
+    return flat.reshape(-1, 3), np.concatenate([kept, extra[:, 0]]), len(extra)
+
+
+def _orient(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
+    """Flip faces so that neighbours traverse shared edges in opposite directions; closed pieces outward."""
+    m = len(faces)
+    a, b, same = _face_graph(faces)
+    graph = sp.coo_matrix((same.astype(np.float64) + 1.0, (a, b)), shape=(m, m)).tocsr()
+    graph = graph + graph.T  # weight 2: same direction (flip needed), 1: consistent
+    count, component = connected_components(graph, directed=False)
+    flip = np.zeros(m, dtype=bool)
+    for piece in range(count):
+        root = int(np.flatnonzero(component == piece)[0])
+        order, parent = breadth_first_order(graph, root, directed=False, return_predecessors=True)
+        children = order[1:]
+        if children.size == 0:
+            continue
+        needs_flip = (np.asarray(graph[parent[children], children]).ravel() == 2).tolist()
+        state = flip.tolist()
+        for face, up, change in zip(children.tolist(), parent[children].tolist(), needs_flip):
+            state[face] = state[up] ^ change
+        flip = np.array(state, dtype=bool)
+    oriented = np.where(flip[:, None], faces[:, ::-1], faces)
+    _, _, same_after = _face_graph(oriented)
+    if np.any(same_after):
+        raise MeshError("the surface is not orientable (like a Moebius strip): no consistent orientation exists")
+    closed = _closed_components(oriented, component, count)
+    for piece in closed:
+        members = component == piece
+        v0, v1, v2 = (vertices[oriented[members, i]] for i in range(3))
+        if np.einsum("ij,ij->i", v0, np.cross(v1, v2)).sum() < 0:  # signed volume, outward positive
+            oriented[members] = oriented[members, ::-1]
+            flip[members] = ~flip[members]
+    return oriented, int(flip.sum())
+
+
+def _closed_components(faces: np.ndarray, component: np.ndarray, count: int) -> list[int]:
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, inverse, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    boundary_face = np.zeros(len(faces), dtype=bool)
+    boundary_face[np.tile(np.arange(len(faces)), 3)[uses[inverse.ravel()] == 1]] = True
+    return [piece for piece in range(count) if not boundary_face[component == piece].any()]
+
+
+def _keep_components(vertices: np.ndarray, faces: np.ndarray, keep: str) -> tuple[np.ndarray, int]:
+    if keep == "all":
+        return faces, 0
+    m = len(faces)
+    a, b, _ = _face_graph(faces)
+    count, component = connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)
+    if count == 1:
+        return faces, 0
+    v0, v1, v2 = (vertices[faces[:, i]] for i in range(3))
+    areas = np.bincount(component, weights=np.linalg.norm(np.cross(v1 - v0, v2 - v0), axis=1), minlength=count)
+    return faces[component == np.argmax(areas)], count - 1

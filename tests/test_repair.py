@@ -1,0 +1,106 @@
+"""Well-defined repairs (repair=True / --repair) and the refusals that remain."""
+
+import numpy as np
+import pytest
+
+import hamsa
+from hamsa import shapes
+from hamsa.cli import main
+from hamsa.errors import MeshError, RepairWarning
+from hamsa.io import load_mesh, save_mesh
+from hamsa.repair import repair_mesh
+
+
+@pytest.fixture(scope="module")
+def ico():
+    return shapes.icosphere(2)
+
+
+def _write_off(path, vertices, faces):
+    lines = [f"OFF\n{len(vertices)} {len(faces)} 0"]
+    lines += [" ".join(f"{x:.17g}" for x in v) for v in vertices]
+    lines += ["3 " + " ".join(str(int(i)) for i in f) for f in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_clean_mesh_is_unchanged(ico):
+    mesh, kept, report = repair_mesh(ico.vertices, ico.faces)
+    assert not report.changed and str(report) == "nothing to repair"
+    np.testing.assert_array_equal(mesh.faces, ico.faces)
+    np.testing.assert_array_equal(kept, np.arange(ico.n_vertices))
+
+
+def test_flipped_faces_duplicates_and_degenerates_are_fixed(ico):
+    faces = ico.faces.copy()
+    faces[[3, 17, 40]] = faces[[3, 17, 40], ::-1]
+    faces = np.vstack([faces, faces[5][::-1], [[0, 0, 1]]])  # a duplicate (reversed) and a degenerate face
+    vertices = np.vstack([ico.vertices, [[5.0, 5.0, 5.0]]])  # and an unreferenced vertex
+    mesh, kept, report = repair_mesh(vertices, faces)
+    assert (report.flipped_faces, report.duplicate_faces, report.degenerate_faces) == (3, 1, 1)
+    assert report.unreferenced_vertices == 1 and kept.tolist() == list(range(ico.n_vertices))
+    assert mesh.is_consistently_oriented
+    np.testing.assert_array_equal(mesh.faces, ico.faces)  # back to the outward orientation
+    # a whole sphere turned inside out comes back outward
+    inside_out, _, report = repair_mesh(ico.vertices, ico.faces[:, ::-1])
+    np.testing.assert_array_equal(inside_out.faces, ico.faces)
+
+
+def test_non_manifold_vertex_is_split_and_mapped_back():
+    a = shapes.icosphere(1)
+    b_vertices = a.vertices + [2.0, 0.0, 0.0]  # a second sphere touching the first at one vertex
+    touch_a = int(np.argmax(a.vertices[:, 0]))
+    touch_b = int(np.argmin(b_vertices[:, 0]))
+    b_vertices[touch_b] = a.vertices[touch_a]
+    remap = np.arange(a.n_vertices) + a.n_vertices
+    remap[touch_b] = touch_a
+    vertices = np.vstack([a.vertices, b_vertices])
+    faces = np.vstack([a.faces, remap[a.faces]])
+    assert hamsa.TriMesh(vertices, faces).non_manifold_vertices.tolist() == [touch_a]
+    mesh, kept, report = repair_mesh(vertices, faces)
+    assert report.split_vertices == 1 and mesh.non_manifold_vertices.size == 0
+    assert np.sum(kept == touch_a) == 2  # the vertex and its copy both map to the original
+    np.testing.assert_allclose(mesh.vertices, vertices[kept])
+    largest, _, report = repair_mesh(vertices, faces, keep="largest")
+    assert report.dropped_components == 1 and largest.vertex_components[0] == 1
+
+
+def test_what_has_no_single_fix_is_still_refused():
+    with pytest.raises(MeshError, match="more than two faces"):
+        repair_mesh(np.eye(3).tolist() + [[0, 0, 0], [1, 1, 1]], [[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    # a Moebius strip: no consistent orientation exists
+    n = 12
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    rim = []
+    for s in (-0.3, 0.3):
+        rim.append(
+            np.stack([(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t), s * np.sin(t / 2)], 1)
+        )
+    vertices = np.vstack(rim)
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        a, b = (i, j) if j else (i, n)  # the last quad closes with a half twist: swap the two rims
+        c, d = (n + i, n + j) if j else (n + i, 0)
+        faces += [[a, b, d], [a, d, c]]
+    with pytest.raises(MeshError, match="not orientable"):
+        repair_mesh(vertices, np.array(faces))
+
+
+def test_load_mesh_repair_warns_and_cli_refuses_then_repairs(tmp_path, ico):
+    faces = ico.faces.copy()
+    faces[7] = faces[7, ::-1]
+    path = _write_off(tmp_path / "flipped.off", ico.vertices, faces)
+    with pytest.warns(RepairWarning, match="1 flipped faces"):
+        mesh = load_mesh(path, repair=True)
+    assert mesh.is_consistently_oriented
+    out = tmp_path / "basis.npz"
+    assert main(["basis", str(path), "-k", "4", "-o", str(out)]) == 2 and not out.exists()
+    assert main(["basis", str(path), "-k", "4", "--repair", "-o", str(out)]) == 0
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, hamsa.eigenbasis(ico, 4).values, rtol=1e-10)
+    two = tmp_path / "two.off"
+    save_mesh(
+        hamsa.TriMesh(np.vstack([ico.vertices, ico.vertices + 3]), np.vstack([ico.faces, ico.faces + ico.n_vertices])),
+        two,
+    )
+    assert main(["basis", str(two), "-k", "4", "-o", str(out)]) == 2
