@@ -87,6 +87,12 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("--potential", help="potential V: .npy, or a text file with one value per vertex")
     basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
+    basis.add_argument(
+        "--laplacian",
+        choices=("cotan", "intrinsic_delaunay"),
+        default="cotan",
+        help="intrinsic_delaunay: robust to needles and obtuse triangles (needs the [robust] extra)",
+    )
     basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
 
     optimize = commands.add_parser(
@@ -232,7 +238,7 @@ def _basis(args) -> None:
     mesh = _load_for_operators(args.mesh, args.repair)
     loaded = time.perf_counter()
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
-    basis = eigenbasis(mesh, args.k, potential, mass=args.mass, backend=args.backend)
+    basis = eigenbasis(mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian)
     solved = time.perf_counter()
     basis.save(output)
     done = time.perf_counter()

@@ -208,6 +208,7 @@ def eigenbasis(
     tol: float = 1e-10,
     backend: str = "auto",
     initial: np.ndarray | None = None,
+    laplacian: str = "cotan",
 ) -> Eigenbasis:
     """The k smallest eigenpairs of the Hamiltonian ``(W + A diag(V)) psi = E A psi`` on a mesh.
 
@@ -232,6 +233,9 @@ def eigenbasis(
         Sparse Cholesky backend (see :mod:`hamsa.factorization`).
     initial : (n, p) array, optional
         Start vectors (e.g. the eigenvectors of a nearby potential): a warm start.
+    laplacian : {"cotan", "intrinsic_delaunay"}
+        "intrinsic_delaunay" for meshes with needles or very obtuse triangles (see
+        :func:`hamsa.operators.intrinsic_delaunay_operators`; the ``[robust]`` extra).
 
     Returns
     -------
@@ -247,10 +251,10 @@ def eigenbasis(
     """
     mesh = as_trimesh(mesh)
     if mass not in MASS_KINDS:
-        raise ValueError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
+        raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
     if potential is not None:
         potential = check_potential(potential, mesh.n_vertices)
-    H, A = hamiltonian(mesh, potential, mass)
+    H, A = hamiltonian(mesh, potential, mass, laplacian)
     lower = float(potential.min()) if potential is not None else 0.0
     values, vectors, info = generalized_eigsh(
         H,
@@ -263,7 +267,7 @@ def eigenbasis(
         initial=initial,
         spectral_scale=4 * np.pi / mesh.area,
     )
-    return Eigenbasis(values, vectors, A, potential, mass, info)
+    return Eigenbasis(values, vectors, A, potential, mass if laplacian == "cotan" else laplacian, info)
 
 
 def generalized_eigsh(

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from hamsa.errors import HamsaError, PotentialError
+from hamsa.errors import HamsaError, MissingDependencyError, PotentialError
 from hamsa.mesh import TriMesh, as_trimesh
 
 MASS_KINDS = ("voronoi", "barycentric", "full")
@@ -184,7 +184,34 @@ def check_potential(potential, n: int) -> np.ndarray:
     return v
 
 
-def hamiltonian(mesh, potential=None, mass: str = "voronoi") -> tuple[sp.csr_matrix, sp.csr_matrix]:
+LAPLACIANS = ("cotan", "intrinsic_delaunay")
+
+
+def intrinsic_delaunay_operators(mesh, mollify: float = 1e-5) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Stiffness and lumped mass of the intrinsic Delaunay triangulation (Sharp & Crane 2020), ``(W, A)``.
+
+    The same piecewise-flat surface, retriangulated by intrinsic edge flips until every edge is
+    Delaunay: all cotangent weights become nonnegative (W is an M-matrix, so diffusion obeys the maximum
+    principle) and needles or very obtuse triangles no longer spoil accuracy. On a mesh that is already
+    Delaunay W equals :func:`stiffness_matrix`. The mass is the intrinsic triangulation's lumped
+    (barycentric) mass; ``mollify`` (a fraction of the mean edge length) lengthens near-degenerate
+    edges first. Needs the ``[robust]`` extra (robust_laplacian).
+    """
+    try:
+        import robust_laplacian
+    except ImportError:
+        raise MissingDependencyError(
+            "the intrinsic Delaunay Laplacian needs robust_laplacian: pip install 'hamsa[robust]'"
+        ) from None
+    mesh = as_trimesh(mesh)
+    mesh.require_operator_ready()
+    W, A = robust_laplacian.mesh_laplacian(mesh.vertices, mesh.faces, mollify_factor=mollify)
+    return sp.csr_matrix(W), sp.csr_matrix(A)
+
+
+def hamiltonian(
+    mesh, potential=None, mass: str = "voronoi", laplacian: str = "cotan"
+) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """The discrete Hamiltonian ``H = W + A diag(V)`` and the mass ``A`` (paper eq. fem6).
 
     Parameters
@@ -196,6 +223,10 @@ def hamiltonian(mesh, potential=None, mass: str = "voronoi") -> tuple[sp.csr_mat
     mass : {"voronoi", "barycentric", "full"}
         Mass kind, see :func:`mass_matrix`; with "full" the potential term is the consistent
         ``integral V phi_i phi_j`` (see :func:`potential_mass_matrix`).
+    laplacian : {"cotan", "intrinsic_delaunay"}
+        "cotan": the paper's W on the mesh as given; "intrinsic_delaunay": W and the lumped mass of the
+        intrinsic Delaunay triangulation (:func:`intrinsic_delaunay_operators`; ``mass`` must then be
+        lumped), robust to needles and obtuse triangles.
 
     Returns
     -------
@@ -207,9 +238,15 @@ def hamiltonian(mesh, potential=None, mass: str = "voronoi") -> tuple[sp.csr_mat
     mesh = as_trimesh(mesh)
     if mass not in MASS_KINDS:
         raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
+    if laplacian not in LAPLACIANS:
+        raise HamsaError(f"laplacian must be one of {LAPLACIANS}, got {laplacian!r}")
     mesh.require_operator_ready()
-    stiffness = stiffness_matrix(mesh)
-    mass_mat = mass_matrix(mesh, mass)
+    if laplacian == "intrinsic_delaunay":
+        if mass == "full":
+            raise HamsaError("the intrinsic Delaunay Laplacian comes with a lumped mass: use mass='voronoi'")
+        stiffness, mass_mat = intrinsic_delaunay_operators(mesh)
+    else:
+        stiffness, mass_mat = stiffness_matrix(mesh), mass_matrix(mesh, mass)
     if potential is None:
         return stiffness, mass_mat
     potential = check_potential(potential, mesh.n_vertices)
