@@ -153,6 +153,18 @@ def test_save_and_load_round_trip(tmp_path, small_mesh):
     (tmp_path / "bad.npz").write_bytes(b"garbage")
     with pytest.raises(HamsaError, match="cannot read eigenbasis"):
         Eigenbasis.load(tmp_path / "bad.npz")
+    # damage that keeps a valid zip: one eigenvector entry changed by 1e-9 -> the SHA-256 checksum catches it
+    with np.load(tmp_path / "b.npz") as data:
+        arrays = dict(data)
+    arrays["vectors"][3, 2] += 1e-9
+    np.savez(tmp_path / "tampered.npz", **arrays)
+    with pytest.raises(HamsaError, match="corrupt"):
+        Eigenbasis.load(tmp_path / "tampered.npz")
+    raw = bytearray((tmp_path / "b.npz").read_bytes())  # a flipped byte inside the zip: bad CRC
+    raw[len(raw) // 2] ^= 0xFF
+    (tmp_path / "flipped.npz").write_bytes(bytes(raw))
+    with pytest.raises(HamsaError):
+        Eigenbasis.load(tmp_path / "flipped.npz")
 
 
 @pytest.mark.parametrize("k", [0, -3, 401, 2.5, True])

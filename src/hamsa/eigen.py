@@ -29,7 +29,9 @@ first entry of magnitude above 1e-3 of its largest is positive (deterministic fo
 
 from __future__ import annotations
 
+import hashlib
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +43,7 @@ from hamsa.errors import HamsaError, SolverError
 from hamsa.factorization import CholeskySolver
 from hamsa.mesh import as_trimesh
 from hamsa.operators import MASS_KINDS, check_potential, hamiltonian
+from hamsa.resources import require_memory
 
 METHODS = ("auto", "krylov", "dense")
 _DENSE_MAX_N = 1500  # "auto" uses the dense solver up to this many vertices
@@ -132,6 +135,7 @@ class Eigenbasis:
         }
         if self.potential is not None:
             arrays["potential"] = self.potential
+        arrays["checksum"] = np.array(_checksum(arrays))
         arrays.update(extra or {})
         from hamsa.io import atomic_write
 
@@ -191,11 +195,27 @@ class Eigenbasis:
                 mass = sp.csr_matrix((data["mass_data"], data["mass_indices"], data["mass_indptr"]), shape=(n, n))
                 potential = data["potential"] if "potential" in data.files else None
                 kind = str(data["mass_kind"])
-        except (OSError, KeyError, ValueError) as exc:
+                if "checksum" in data.files and str(data["checksum"]) != _checksum(data):
+                    raise HamsaError(f"'{path}' is corrupt: its arrays do not match their SHA-256 checksum")
+        except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             if isinstance(exc, HamsaError):
                 raise
             raise HamsaError(f"cannot read eigenbasis '{path}': {exc}") from None
         return cls(values, vectors, mass, potential, kind)
+
+
+_CHECKED = ("values", "vectors", "mass_data", "mass_indices", "mass_indptr", "potential")
+
+
+def _checksum(arrays) -> str:
+    """SHA-256 over the basis arrays (dtype, shape and bytes), so a damaged file is detected on load."""
+    digest = hashlib.sha256()
+    for name in _CHECKED:
+        if name in arrays:
+            array = np.ascontiguousarray(arrays[name])
+            digest.update(f"{name}:{array.dtype.str}:{array.shape}".encode())
+            digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 def eigenbasis(
@@ -325,6 +345,7 @@ def generalized_eigsh(
                 f"a dense eigensolve of n = {n} needs {3 * 8 * n * n / 1e9:.0f} GB; ask for fewer than n/3 "
                 "eigenpairs to use the sparse solver"
             )
+        require_memory(3 * 8 * n * n, f"a dense eigensolve of n = {n}")
         values, vectors = sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
         info = SolveInfo(method="dense")
     else:
@@ -431,6 +452,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     capacity = min(n, max(wanted + 5 * width, 3 * wanted))
     if capacity < n and wanted + 2 * width > capacity:
         raise SolverError(f"k = {k} is too large for the sparse solver on n = {n}: use method='dense'")
+    require_memory(2 * 8 * n * capacity, f"the Krylov basis for k = {k} eigenpairs of n = {n} (2 x {capacity} columns)")
     Q = np.empty((n, capacity), order="F")  # column blocks are contiguous
     AQ = np.empty((n, capacity), order="F")
     T = np.zeros((capacity, capacity))

@@ -30,3 +30,7 @@ class MissingDependencyError(HamsaError, ImportError):
 
 class RepairWarning(UserWarning):
     """A mesh was changed by an explicit ``repair=True`` request; the message says what changed."""
+
+
+class ResourceError(HamsaError, MemoryError):
+    """A request would not fit in this machine's memory; the message says how much it needs."""
