@@ -148,9 +148,11 @@ def test_killed_run_resumes_without_redoing_finished_experiments(tmp_path):
     deadline = time.monotonic() + 120
     while not state.exists() and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.05)
-    os.kill(process.pid, signal.SIGKILL)
+    if process.poll() is None:
+        os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    assert state.exists() and not (tmp_path / "results.json").exists()
+    assert state.exists(), f"the first experiment never finished (exit code {process.returncode})"
+    assert not (tmp_path / "results.json").exists(), "the run finished before it could be killed"
     first = (tmp_path / "fig1_harmonics_1d.png").stat().st_mtime_ns
     results = reproduce(tmp_path, quick=True, only=["fig1", "fig6"], progress=False)
     assert results["experiments"]["fig1_harmonics_1d"]["cached"] is True
