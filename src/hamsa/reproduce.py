@@ -202,9 +202,21 @@ def report_html(results: dict, records: dict, output: Path) -> str:
         f"<p>hamsa {e(results['hamsa_version'])}; data: {e(str(results['data'] or 'built-in shapes'))}; "
         f"{'quick sizes' if results['quick'] else 'full sizes'}. Paper: Choukroun, Shtern, Bronstein &amp; "
         "Kimmel, IEEE TVCG 2018. Numbers are also in <code>results.json</code>.</p>",
-        "<h2>Claims checklist</h2><table><tr><th>id</th><th>claim</th><th>verdict</th><th>measured</th>"
-        "<th>source</th></tr>",
     ]
+    verdicts = [c["verdict"] for c in results["claims"]]
+    failed = [n for n, r in records.items() if r["status"] != "ok"]
+    parts.append(
+        f"<p><b>{verdicts.count('reproduced')} of {len(verdicts)} claims reproduced</b>, "
+        f"{verdicts.count('not reproduced')} not reproduced"
+        + (f"; <b>failed experiments: {e(', '.join(failed))}</b>" if failed else "")
+        + ". Experiments: "
+        + ", ".join(f"<a href='#{x.name}'>{e(x.name)}</a>" for x in EXPERIMENTS if x.name in records)
+        + "</p>"
+    )
+    parts.append(
+        "<h2>Claims checklist</h2><table><tr><th>id</th><th>claim</th><th>verdict</th><th>measured</th>"
+        "<th>source</th></tr>"
+    )
     for claim in results["claims"]:
         css = claim["verdict"].replace(" ", "-")
         parts.append(
