@@ -145,6 +145,19 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
+    bench = commands.add_parser(
+        "benchmark-matching", help="every evaluation pair of a dataset, LBO vs Hamiltonian, Kim et al. table"
+    )
+    bench.add_argument("dataset", help="dataset folder (TOSCA or SCAPE layout, or a folder of meshes)")
+    bench.add_argument("--kind", choices=("auto", "tosca", "scape", "folder"), default="auto")
+    bench.add_argument("--method", nargs="+", choices=("hks", "wks", "fmap"), default=["hks", "wks", "fmap"])
+    bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
+    bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
+    bench.add_argument("--jobs", type=_positive_int, default=1, help="parallel worker processes (default 1)")
+    bench.add_argument("--limit", type=_positive_int, help="at most this many pairs per class (a quick look)")
+    bench.add_argument("--scheduler", help="Dask scheduler address: run the pairs on that cluster")
+    bench.add_argument("-o", "--output", required=True, help="results folder (resumable: finished pairs are kept)")
+
     view = commands.add_parser("view", help="an interactive HTML page of the first eigenfunctions (rotate, switch)")
     view.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL; .gz too)")
     view.add_argument("--repair", action="store_true", help=REPAIR_HELP)
@@ -399,6 +412,27 @@ def _match(args) -> None:
     print(f"wrote           {output}")
 
 
+def _benchmark_matching(args) -> None:
+    from hamsa.benchmark import benchmark_dataset, table_markdown
+    from hamsa.datasets import load_folder, load_scape, load_tosca
+
+    root = Path(args.dataset)
+    if not root.is_dir():
+        raise HamsaError(f"dataset folder '{root}' does not exist")
+    kind = args.kind
+    if kind == "auto":
+        kind = "scape" if "scape" in root.name.lower() else "tosca" if "tosca" in root.name.lower() else "folder"
+    dataset = {"tosca": load_tosca, "scape": load_scape, "folder": load_folder}[kind](root)
+    if not dataset.pairs():
+        raise HamsaError(f"'{root}' has no evaluation pairs (each class needs at least two shapes)")
+    output = Path(args.output)
+    if not (output.parent if str(output.parent) else Path(".")).is_dir():
+        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    table = benchmark_dataset(dataset, output, args.method, args.k, args.points, args.jobs, args.limit, args.scheduler)
+    print(table_markdown(table), end="")
+    print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")
+
+
 def _view(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.viz import to_html
@@ -464,6 +498,7 @@ def main(argv: list[str] | None = None) -> int:
         "modes": _modes,
         "match": _match,
         "view": _view,
+        "benchmark-matching": _benchmark_matching,
         "reproduce": _reproduce,
         "demo": _demo,
     }

@@ -116,11 +116,16 @@ def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, 
 
     ``s_j = sign(<phi_j^source, phi_j^target o map>_A)``: what the paper assumes when it builds the
     same eigenfunction-sum potential on two shapes (NOTES T14). Uses ground truth: for evaluation only.
+    Entries of -1 in the map (vertices without a known image) are left out of the products.
     """
     index = np.asarray(map_source_to_target)
-    weights = source.mass.diagonal()
+    if index.shape != (source.n,):
+        raise HamsaError(f"the map has shape {index.shape}, the source has {source.n} vertices")
+    known = index >= 0
+    weights = source.mass.diagonal()[known]
     indices = np.asarray(indices)
-    products = np.sum(weights[:, None] * source.vectors[:, indices] * target.vectors[index][:, indices], axis=0)
+    a, b = source.vectors[known][:, indices], target.vectors[index[known]][:, indices]
+    products = np.sum(weights[:, None] * a * b, axis=0)
     return np.where(products >= 0, 1.0, -1.0)
 
 

@@ -27,22 +27,11 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, shapes
-from hamsa.diffusion import default_hks_times, default_wks_energies, heat_kernel_signature, wave_kernel_signature
-from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
-from hamsa.matching import (
-    functional_from_map,
-    functional_map,
-    icp_refine,
-    match_descriptors,
-    offdiagonal_energy,
-    resolve_signs,
-    zoomout,
-)
+from hamsa.benchmark import BASES, METHODS, SCORES, evaluate_pair, summarize
+from hamsa.evaluation import THRESHOLDS
+from hamsa.matching import functional_from_map, offdiagonal_energy
 
 from ._common import Timer, data_file, parse_args, save_figure, unit_area, write_json
-
-METHODS = ("hks", "wks", "fmap")
-BASES = ("lbo", "hamiltonian")
 
 
 def _pairs(args):
@@ -59,36 +48,6 @@ def _pairs(args):
     return "built-in humanoid poses", pairs[:2] if args.quick else pairs
 
 
-def _match(method: str, source, target) -> np.ndarray:
-    if method == "hks":
-        times = default_hks_times(source, 50)
-        return match_descriptors(
-            heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-        )
-    if method == "wks":
-        energies, sigma = default_wks_energies(source, 50)
-        return match_descriptors(
-            wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
-        )
-    small = source.truncate(20), target.truncate(20)
-    times = default_hks_times(source, 30)
-    C = functional_map(
-        *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-    )
-    _, initial = icp_refine(C, *small)
-    return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
-
-
-def _bases(source, target, k: int):
-    lbo = hamsa.eigenbasis(source, k), hamsa.eigenbasis(target, k)
-    identity = np.arange(source.n_vertices)
-    signs = resolve_signs(*lbo, identity, (1, 2, 3, 4))
-    V_s = potentials.eigenfunction_sum(lbo[0])
-    V_t = potentials.eigenfunction_sum(lbo[1], signs=signs)
-    hamiltonian = hamsa.eigenbasis(source, k, V_s / V_s.max()), hamsa.eigenbasis(target, k, V_t / V_t.max())
-    return {"lbo": lbo, "hamiltonian": hamiltonian}
-
-
 def _functional_maps(source, target, lbo, size: int = 30, mu: float = 100.0):
     """Ground-truth |C| in LBO bases and in area-distortion Hamiltonian bases (mu times V >= 1)."""
     identity = np.arange(source.n_vertices)
@@ -103,29 +62,20 @@ def run(args) -> dict:
     timer = Timer()
     dataset, pairs = _pairs(args)
     k = 60 if args.quick else 100
-    results = {m: {b: [] for b in BASES} for m in METHODS}
     curves = {m: {b: [] for b in BASES} for m in METHODS}
-    rows = []
-    fmaps = None
+    records, rows = [], []
     for source_name, target_name, source, target in pairs:
-        points = sample_points(source.n_vertices, 1000)
-        truth = TruthDistances(target, points)  # identity ground truth
-        bases = _bases(source, target, k)
-        for basis in BASES:
-            for method in METHODS:
-                mapping = _match(method, *bases[basis])
-                errors = truth.errors(mapping[points])
-                results[method][basis].append(summary(errors))
-                curves[method][basis].append(error_curve(errors))
-                rows.append(
-                    {"source": source_name, "target": target_name, "basis": basis, "method": method, **summary(errors)}
-                )
-        if fmaps is None:
-            fmaps = _functional_maps(source, target, bases["lbo"])
-    mean = {
-        m: {b: {key: float(np.mean([r[key] for r in results[m][b]])) for key in results[m][b][0]} for b in BASES}
-        for m in METHODS
-    }
+        scored = evaluate_pair(source, target, np.arange(source.n_vertices), k)  # identity ground truth
+        records.append(scored)
+        rows += [{"source": source_name, "target": target_name, **row} for row in scored["rows"]]
+        for method, by_basis in scored["curves"].items():
+            for basis, curve in by_basis.items():
+                curves[method][basis].append(curve)
+    mean = {m: {} for m in METHODS}
+    for row in summarize(records, dataset)["rows"]:
+        mean[row["method"]][row["basis"]] = {key: row[key] for key in SCORES}
+    source, target = pairs[0][2], pairs[0][3]
+    fmaps = _functional_maps(source, target, (hamsa.eigenbasis(source, 30), hamsa.eigenbasis(target, 30)))
     C_lbo, C_h, _ = fmaps
     numbers = {
         "dataset": dataset,

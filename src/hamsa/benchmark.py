@@ -1,0 +1,291 @@
+"""Matching benchmarks over whole datasets: every pair, every method, LBO vs Hamiltonian bases (paper §5).
+
+For a pair (source, target) with a ground-truth map, :func:`evaluate_pair` builds the bases — the LBO's
+and the Hamiltonian's with the paper's matching potential V = normalized sum of phi_2..phi_5 scaled to
+[0, 1] (eigenfunction signs resolved by the ground truth, as the paper assumes; NOTES T14) — runs the
+matchers and scores them by the Kim et al. protocol (geodesic error on the target / sqrt(area), no
+symmetries, on a seeded sample of source vertices):
+
+* ``hks`` / ``wks``: nearest neighbours of the heat / wave kernel signatures;
+* ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k.
+
+:func:`benchmark_dataset` runs every evaluation pair of a :class:`~hamsa.datasets.Dataset` in parallel
+(joblib processes; a Dask cluster through joblib's backend when given a scheduler address) with a
+progress bar. Each pair's result is written atomically to ``output/pairs/<source>__<target>.json``
+together with a hash of the settings, so an interrupted run resumes where it stopped; the summary
+table (method x basis -> mean AUC on [0, 0.25], mean error, fraction within 0.05) goes to
+``output/table.json``, ``output/table.md`` and the mean curves to ``output/curves.png``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from hamsa import __version__, potentials
+from hamsa.datasets import Dataset, cached_eigenbasis
+from hamsa.diffusion import default_hks_times, default_wks_energies, heat_kernel_signature, wave_kernel_signature
+from hamsa.eigen import eigenbasis
+from hamsa.errors import HamsaError
+from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
+from hamsa.io import atomic_write
+from hamsa.matching import functional_map, icp_refine, match_descriptors, resolve_signs, zoomout
+from hamsa.mesh import TriMesh
+
+METHODS = ("hks", "wks", "fmap")
+BASES = ("lbo", "hamiltonian")
+SCORES = ("auc", "mean_error", "within_0.05")
+
+
+def match_pair(method: str, source, target) -> np.ndarray:
+    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases."""
+    if method == "hks":
+        times = default_hks_times(source, 50)
+        return match_descriptors(
+            heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
+        )
+    if method == "wks":
+        energies, sigma = default_wks_energies(source, 50)
+        return match_descriptors(
+            wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
+        )
+    if method == "fmap":
+        small = source.truncate(20), target.truncate(20)
+        times = default_hks_times(source, 30)
+        C = functional_map(
+            *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
+        )
+        _, initial = icp_refine(C, *small)
+        return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
+    raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
+
+
+def paired_bases(source: TriMesh, target: TriMesh, ground_truth, k: int, cache_dir=None) -> dict:
+    """{"lbo": (source basis, target basis), "hamiltonian": (...)} with the paper's matching potential.
+
+    ``ground_truth`` (n_source,) target ids (-1 where unknown) resolves the eigenfunction signs.
+    """
+    solve = (lambda mesh, V=None: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
+        lambda mesh, V=None: eigenbasis(mesh, k, V)
+    )  # fmt: skip
+    lbo = solve(source), solve(target)
+    signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4))
+    V_s = potentials.eigenfunction_sum(lbo[0])
+    V_t = potentials.eigenfunction_sum(lbo[1], signs=signs)
+    return {"lbo": lbo, "hamiltonian": (solve(source, V_s / V_s.max()), solve(target, V_t / V_t.max()))}
+
+
+def evaluate_pair(
+    source: TriMesh,
+    target: TriMesh,
+    ground_truth,
+    k: int = 100,
+    methods=METHODS,
+    points: int = 1000,
+    seed: int = 0,
+    cache_dir=None,
+) -> dict:
+    """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}."""
+    truth = np.asarray(ground_truth)
+    if truth.shape != (source.n_vertices,):
+        raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
+    candidates = np.flatnonzero(truth >= 0)
+    chosen = candidates[sample_points(len(candidates), points, seed)]
+    distances = TruthDistances(target, truth[chosen])
+    bases = paired_bases(source, target, truth, k, cache_dir)
+    rows, curves = [], {}
+    for method in methods:
+        for basis in BASES:
+            mapping = match_pair(method, *bases[basis])
+            errors = distances.errors(mapping[chosen])
+            rows.append({"method": method, "basis": basis, **summary(errors)})
+            curves.setdefault(method, {})[basis] = error_curve(errors).tolist()
+    return {"rows": rows, "curves": curves}
+
+
+def dataset_pairs(dataset: Dataset, limit: int | None = None) -> list[tuple[str, str]]:
+    """The dataset's evaluation pairs, optionally only the first ``limit`` of each class (a quick look)."""
+    pairs = dataset.pairs()
+    if limit is None:
+        return pairs
+    taken: dict[str, int] = {}
+    chosen = []
+    for source, target in pairs:
+        c = dataset.classes[source]
+        if taken.get(c, 0) < limit:
+            chosen.append((source, target))
+            taken[c] = taken.get(c, 0) + 1
+    return chosen
+
+
+def _identity_truth(source_kept: np.ndarray, target_kept: np.ndarray, n_target_original: int) -> np.ndarray:
+    """Identity ground truth in original ids, carried through the vertices each side kept (-1: dropped)."""
+    position = np.full(max(n_target_original, int(source_kept.max()) + 1), -1, dtype=np.int64)
+    position[target_kept] = np.arange(len(target_kept))
+    return position[source_kept]
+
+
+def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: dict, path: Path) -> dict:
+    source, source_kept = dataset.load(source_name)
+    target, target_kept = dataset.load(target_name)
+    source, target = _unit_area(source), _unit_area(target)
+    truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    result = evaluate_pair(
+        source, target, truth, settings["k"], settings["methods"], settings["points"], cache_dir=settings["cache"]
+    )
+    record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
+    with atomic_write(path, "w") as handle:
+        json.dump(record, handle)
+    return record
+
+
+def _unit_area(mesh: TriMesh) -> TriMesh:
+    return TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
+
+
+def _settings_key(settings: dict) -> str:
+    public = {k: v for k, v in settings.items() if k != "cache"}
+    return hashlib.sha256(json.dumps([__version__, public], sort_keys=True).encode()).hexdigest()
+
+
+def _finished(path: Path, key: str) -> dict | None:
+    try:
+        record = json.loads(path.read_text())
+        return record if record.get("settings_key") == key and record.get("rows") else None
+    except (OSError, ValueError):
+        return None
+
+
+def benchmark_dataset(
+    dataset: Dataset,
+    output,
+    methods=METHODS,
+    k: int = 100,
+    points: int = 1000,
+    jobs: int = 1,
+    limit: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> dict:
+    """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
+
+    Parameters
+    ----------
+    dataset : a Dataset (:func:`hamsa.datasets.load_tosca`, ``load_scape``, ``load_folder``)
+    output : folder for ``pairs/*.json``, ``table.json``, ``table.md``, ``curves.png`` and the basis cache
+    methods : subset of :data:`METHODS`
+    k : eigenpairs per basis; points : evaluated source vertices per pair (seeded sample)
+    jobs : parallel worker processes (joblib); scheduler : a Dask scheduler address ("tcp://host:8786")
+        to run the pairs on a cluster instead (needs ``dask.distributed``)
+    limit : at most this many pairs per class
+    """
+    unknown = set(methods) - set(METHODS)
+    if unknown:
+        raise HamsaError(f"unknown matching methods {sorted(unknown)}; known: {', '.join(METHODS)}")
+    output = Path(output)
+    (output / "pairs").mkdir(parents=True, exist_ok=True)
+    settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
+    key = _settings_key(settings)
+    todo, records = [], []
+    for source, target in dataset_pairs(dataset, limit):
+        path = output / "pairs" / f"{source}__{target}.json"
+        done = _finished(path, key)
+        if done:
+            records.append(done)
+        else:
+            todo.append((source, target, path))
+    records += _run_parallel(dataset, todo, settings, jobs, scheduler, progress)
+    table = summarize(records, dataset.name)
+    _write_outputs(output, table, records, dataset.name)
+    return table
+
+
+def _run_parallel(dataset, todo, settings, jobs, scheduler, progress) -> list[dict]:
+    if not todo:
+        return []
+    try:
+        import joblib
+    except ImportError:
+        raise HamsaError("dataset benchmarks need joblib: pip install 'hamsa[bench]'") from None
+    from tqdm.auto import tqdm
+
+    tasks = (joblib.delayed(_run_pair)(dataset, s, t, settings, path) for s, t, path in todo)
+    results = []
+    if scheduler:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise HamsaError("a Dask scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
+        with Client(scheduler), joblib.parallel_config(backend="dask"):
+            stream = joblib.Parallel(return_as="generator_unordered")(tasks)
+            results = list(tqdm(stream, total=len(todo), desc="pairs", disable=not progress))
+    else:
+        stream = joblib.Parallel(n_jobs=jobs, return_as="generator_unordered")(tasks)
+        results = list(tqdm(stream, total=len(todo), desc="pairs", disable=not progress))
+    return results
+
+
+def summarize(records: list[dict], dataset_name: str) -> dict:
+    """Mean AUC, mean error and fraction within 0.05 per method x basis over the pairs."""
+    rows = []
+    for method in METHODS:
+        for basis in BASES:
+            found = [r for record in records for r in record["rows"] if r["method"] == method and r["basis"] == basis]
+            if found:
+                rows.append(
+                    {
+                        "dataset": dataset_name,
+                        "method": method,
+                        "basis": basis,
+                        "pairs": len(found),
+                        **{key: float(np.mean([r[key] for r in found])) for key in SCORES},
+                    }
+                )
+    return {"dataset": dataset_name, "pairs": len(records), "rows": rows}
+
+
+def table_markdown(table: dict) -> str:
+    lines = [
+        "| dataset | method | basis | pairs | AUC [0, 0.25] | mean error | within 0.05 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in table["rows"]:
+        lines.append(
+            f"| {r['dataset']} | {r['method']} | {r['basis']} | {r['pairs']} | {r['auc']:.3f} | "
+            f"{r['mean_error']:.4f} | {100 * r['within_0.05']:.1f}% |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _write_outputs(output: Path, table: dict, records: list[dict], name: str) -> None:
+    with atomic_write(output / "table.json", "w") as handle:
+        json.dump(table, handle, indent=2)
+    with atomic_write(output / "table.md", "w") as handle:
+        handle.write(table_markdown(table))
+    if not records:
+        return
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return  # the table is the result; the plot needs the [viz] extra
+    methods = [m for m in METHODS if m in records[0]["curves"]]
+    figure, axes = plt.subplots(1, len(methods), figsize=(4.2 * len(methods), 3.6), sharey=True, squeeze=False)
+    for ax, method in zip(axes[0], methods):
+        for basis, style in zip(BASES, ("--", "-")):
+            curve = np.mean([r["curves"][method][basis] for r in records], axis=0)
+            ax.plot(THRESHOLDS, curve, style, label=basis)
+        ax.set_title(f"{method} — {name} ({len(records)} pairs)", fontsize=10)
+        ax.set_xlabel("geodesic error / sqrt(area)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right", fontsize=8)
+    axes[0][0].set_ylabel("% correspondences")
+    figure.tight_layout()
+    with atomic_write(output / "curves.png", "wb") as handle:
+        figure.savefig(handle, format="png", dpi=110)
+    plt.close(figure)
