@@ -114,8 +114,26 @@ def run_cli(args: list[str], folder: Path) -> tuple[str, str]:
     return "traceback", (stderr[-1] if stderr else f"exit {result.returncode}")
 
 
+def _corrupted_basis(basis):
+    def case():
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "basis.npz"
+            basis.save(path)
+            with np.load(path) as data:
+                arrays = dict(data)
+            arrays["vectors"][0, 0] += 1e-6
+            np.savez(path, **arrays)
+            hamsa.Eigenbasis.load(path)
+
+    return case
+
+
 def api_cases() -> dict[str, callable]:
     from hamsa import diffusion, potentials
+    from hamsa.benchmark import match_pair
+    from hamsa.repair import repair_mesh
+    from hamsa.reproduce import reproduce
+    from hamsa.viz import to_html
 
     sphere = shapes.icosphere(2)
     basis = hamsa.eigenbasis(sphere, 8)
@@ -138,6 +156,19 @@ def api_cases() -> dict[str, callable]:
         "project wrong length": lambda: basis.project(np.ones(n + 1)),
         "mesh from a string": lambda: hamsa.eigenbasis("sphere.off", 4),
         "vertices (n, 2)": lambda: hamsa.TriMesh(np.zeros((3, 2)), [[0, 1, 2]]),
+        "basis from non-orthonormal arrays": lambda: hamsa.Eigenbasis.from_arrays(
+            basis.values, 2 * basis.vectors, basis.mass.diagonal()
+        ),
+        "corrupted basis file": _corrupted_basis(basis),
+        "repair a non-manifold edge": lambda: repair_mesh(
+            np.eye(3).tolist() + [[0, 0, 0], [1, 1, 1]], [[0, 1, 2], [1, 0, 3], [0, 1, 4]]
+        ),
+        "unknown matching method": lambda: match_pair("sift", basis, basis),
+        "view field of wrong length": lambda: to_html(sphere, np.zeros(n + 3), "never.html"),
+        "unknown experiment": lambda: reproduce("never", only=["fig99"], progress=False),
+        "intrinsic Laplacian, full mass": lambda: hamsa.eigenbasis(
+            sphere, 4, mass="full", laplacian="intrinsic_delaunay"
+        ),
     }
 
 

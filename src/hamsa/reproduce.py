@@ -126,13 +126,13 @@ def reproduce(
     and ``claims`` (a list of {id, claim, verdict, measured, source}).
     """
     output = Path(output)
-    output.mkdir(parents=True, exist_ok=True)
     if data is not None and not Path(data).is_dir():
         raise HamsaError(f"data folder '{data}' does not exist")
     chosen = [e for e in EXPERIMENTS if not only or any(e.name.startswith(o) for o in only)]
     if not chosen:
         names = ", ".join(e.name for e in EXPERIMENTS)
         raise HamsaError(f"no experiment matches {only}; known: {names}")
+    output.mkdir(parents=True, exist_ok=True)
     for stale in [*output.glob(".*.tmp"), *(output / ".state").glob(".*.tmp")]:
         stale.unlink(missing_ok=True)  # left by a killed run; outputs only ever appear by rename
     from tqdm.auto import tqdm
