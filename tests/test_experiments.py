@@ -163,3 +163,4 @@ def test_killed_run_resumes_without_redoing_finished_experiments(tmp_path):
     (tmp_path / "fig1_harmonics_1d.png").write_bytes(b"not a png")
     again = reproduce(tmp_path, quick=True, only=["fig1"], progress=False)
     assert again["experiments"]["fig1_harmonics_1d"]["cached"] is False
+    assert again["experiments"]["fig6_optimize_1d"]["cached"] is True  # --only keeps the others' results

@@ -146,6 +146,12 @@ def reproduce(
             record = records[experiment.name]
             how = "cached" if record["cached"] else f"{record['seconds']} s"
             bar.write(f"  {experiment.name}: {record['status']} ({how})")
+    for experiment in EXPERIMENTS:  # with --only, the report still shows the others' intact cached results
+        if experiment.name not in records:
+            cached = _cached(output / ".state" / f"{experiment.name}.json", input_key(experiment, data, quick), output)
+            if cached is not None:
+                records[experiment.name] = {**cached, "cached": True}
+    records = {e.name: records[e.name] for e in EXPERIMENTS if e.name in records}
     results = {
         "hamsa_version": __version__,
         "data": str(Path(data).resolve()) if data else None,
