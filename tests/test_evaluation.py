@@ -74,3 +74,9 @@ def test_truth_distances_equal_geodesic_errors_for_every_map():
         np.testing.assert_allclose(table.errors(predicted), geodesic_errors(mesh, predicted, truth), rtol=1e-12)
     with pytest.raises(HamsaError, match="predicted"):
         table.errors(predicted[:5])
+
+
+def test_points_mapped_to_another_component_count_as_unreachable():
+    scores = summary(np.array([0.0, 0.01, np.inf, 0.2]))
+    assert scores["unreachable"] == 0.25 and scores["mean_error"] == pytest.approx(0.07)
+    assert scores["within_0.05"] == 0.5 and 0 < scores["auc"] < 1

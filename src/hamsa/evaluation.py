@@ -115,10 +115,17 @@ def area_under_curve(errors, thresholds=THRESHOLDS) -> float:
 
 
 def summary(errors) -> dict:
-    """Mean error, area under the curve on [0, 0.25], and the fraction of points within 0.05."""
+    """Mean error, area under the curve on [0, 0.25], the fraction within 0.05, and the fraction unreachable.
+
+    A point mapped to a different connected component of the target has an infinite geodesic error: it
+    counts as beyond every threshold of the curve, is left out of the mean (reported as ``unreachable``
+    instead), and the mean is NaN only if no point is reachable.
+    """
     errors = np.asarray(errors, dtype=np.float64)
+    finite = np.isfinite(errors)
     return {
-        "mean_error": float(errors.mean()),
+        "mean_error": float(errors[finite].mean()) if finite.any() else float("nan"),
         "auc": area_under_curve(errors),
         "within_0.05": float(np.mean(errors <= 0.05)),
+        "unreachable": float(np.mean(~finite)),
     }
