@@ -8,13 +8,21 @@ a second baseline hands eigsh a CHOLMOD factorization as ``OPinv``. Every timing
 For each mesh and k it prints hamsa's time, each baseline's time, baseline / hamsa, and the largest
 relative eigenvalue difference (relative to max(|E_i|, E_2), so zero modes are compared absolutely).
 
+``--warm`` adds the warm-start case: a potential V, then V changed by 5% (multiplicative noise);
+cold = a fresh solve of the changed problem, warm = :class:`hamsa.eigen.HamiltonianEigensolver`'s second
+solve (previous eigenvectors as the start, symbolic factorization reused); prints cold / warm.
+``--gpu`` times the CuPy Chebyshev solver (``device="cuda"``) instead of the CPU one, with its warm start.
+``--no-baselines`` skips eigsh (for the 1M-vertex run); peak memory is printed at the end.
+
     python benchmarks/eigensolve.py                      # 10k, 50k, 200k built-in + TOSCA david0, k = 50 100 200
-    python benchmarks/eigensolve.py --sizes 50000 --k 100 --no-data
+    python benchmarks/eigensolve.py --sizes 50000 --k 100 --no-data --warm
+    python benchmarks/eigensolve.py --sizes 50000 200000 --k 100 --gpu --warm   # on a machine with CUDA
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import sys
 import time
@@ -25,6 +33,7 @@ import scipy.sparse.linalg as spla
 
 import hamsa
 from hamsa import shapes
+from hamsa.eigen import HamiltonianEigensolver
 from hamsa.factorization import HAVE_CHOLMOD
 from hamsa.operators import hamiltonian
 
@@ -72,37 +81,75 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="runs per timing (median)")
     parser.add_argument("--no-data", action="store_true", help="skip TOSCA david0 even if ../shared/data exists")
     parser.add_argument("--no-cholmod-baseline", action="store_true")
+    parser.add_argument("--no-baselines", action="store_true", help="time hamsa only (e.g. at 1M vertices)")
+    parser.add_argument("--warm", action="store_true", help="add the warm start after a 5%% change of V")
+    parser.add_argument("--gpu", action="store_true", help="time hamsa on the GPU (device='cuda')")
+    parser.add_argument("--tol", type=float, default=1e-10, help="hamsa's relative residual target")
     args = parser.parse_args(argv)
+    device = "cuda" if args.gpu else "cpu"
 
     meshes = [(f"bumpy sphere {n // 1000}k", lambda n=n: bumpy_sphere(n)) for n in args.sizes]
     david = DATA / "tosca_hires" / "meshes" / "david0.off.gz"
     if not args.no_data and david.exists():
         meshes.append(("TOSCA david0", lambda: hamsa.load_mesh(david)))
-    with_cholmod = HAVE_CHOLMOD and not args.no_cholmod_baseline
-    print(
-        f"hamsa {hamsa.__version__}; hamsa backend: {'CHOLMOD' if HAVE_CHOLMOD else 'SuperLU'}; "
-        f"median of {args.repeat} run(s)"
-    )
-    header = f"{'mesh':<18} {'n':>8} {'k':>4} {'hamsa s':>8} {'eigsh+SuperLU s':>16} {'ratio':>6}"
+    with_cholmod = HAVE_CHOLMOD and not args.no_cholmod_baseline and not args.no_baselines
+    solver = "CuPy Chebyshev on the GPU" if args.gpu else f"Krylov, {'CHOLMOD' if HAVE_CHOLMOD else 'SuperLU'}"
+    print(f"hamsa {hamsa.__version__}; hamsa solver: {solver}; tol {args.tol:g}; median of {args.repeat} run(s)")
+    header = f"{'mesh':<18} {'n':>8} {'k':>4} {'hamsa s':>8}"
+    if not args.no_baselines:
+        header += f" {'eigsh+SuperLU s':>16} {'ratio':>6}"
     if with_cholmod:
         header += f" {'eigsh+CHOLMOD s':>16} {'ratio':>6}"
-    header += f" {'max rel diff':>12}"
+    if not args.no_baselines:
+        header += f" {'max rel diff':>12}"
+    if args.warm:
+        header += f" {'cold s':>7} {'warm s':>7} {'cold/warm':>9}"
+    if args.gpu:  # CUDA context, cuSPARSE/cuSOLVER handles and CuPy's kernels are made once, not timed
+        hamsa.eigenbasis(bumpy_sphere(5000), 20, device="cuda")
     print(header)
     for name, build in meshes:
         mesh = build()
         H, A = hamiltonian(mesh)
         for k in args.k:
-            t_hamsa, basis = median_time(lambda: hamsa.eigenbasis(mesh, k, method="krylov"), args.repeat)
-            t_superlu, reference = median_time(lambda: eigsh_superlu(H, A, k), args.repeat)
-            row = (
-                f"{name:<18} {mesh.n_vertices:>8} {k:>4} {t_hamsa:>8.2f} {t_superlu:>16.2f} {t_superlu / t_hamsa:>6.2f}"
+            t_hamsa, basis = median_time(
+                lambda: hamsa.eigenbasis(mesh, k, method="auto" if args.gpu else "krylov", tol=args.tol, device=device),
+                args.repeat,
             )
+            row = f"{name:<18} {mesh.n_vertices:>8} {k:>4} {t_hamsa:>8.2f}"
+            if not args.no_baselines:
+                t_superlu, reference = median_time(lambda: eigsh_superlu(H, A, k), args.repeat)
+                row += f" {t_superlu:>16.2f} {t_superlu / t_hamsa:>6.2f}"
             if with_cholmod:
                 t_cholmod, _ = median_time(lambda: eigsh_cholmod(H, A, k), args.repeat)
                 row += f" {t_cholmod:>16.2f} {t_cholmod / t_hamsa:>6.2f}"
-            row += f" {relative_difference(basis.values, reference):>12.1e}"
+            if not args.no_baselines:
+                row += f" {relative_difference(basis.values, reference):>12.1e}"
+            if args.warm:
+                t_cold, t_warm = warm_start_times(mesh, k, args, device)
+                row += f" {t_cold:>7.2f} {t_warm:>7.2f} {t_cold / t_warm:>9.2f}"
             print(row, flush=True)
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    print(f"peak resident memory of this process: {peak_gb:.2f} GB")
+    if args.gpu:
+        import cupy
+
+        print(f"peak GPU memory (CuPy pool): {cupy.get_default_memory_pool().total_bytes() / 1e9:.2f} GB")
     return 0
+
+
+def warm_start_times(mesh, k, args, device):
+    """Median (cold, warm) seconds for the problem after a 5% change of a smooth potential."""
+    x = mesh.vertices[:, 0]
+    V = 50 * (x - x.min()) / (np.ptp(x) or 1.0) * (4 * np.pi / mesh.area)  # up to about E_20
+    changed = V * (1 + 0.05 * np.random.default_rng(1).standard_normal(V.size))
+    method = "chebyshev" if args.gpu else "krylov"
+    cold, _ = median_time(lambda: hamsa.eigenbasis(mesh, k, changed, method=method, tol=args.tol, device=device), 1)
+    warm_runs = []
+    for _ in range(args.repeat):
+        solver = HamiltonianEigensolver.for_mesh(mesh, k, tol=args.tol, method=method, device=device)
+        solver.solve(V)
+        warm_runs.append(median_time(lambda: solver.solve(changed), 1)[0])
+    return cold, statistics.median(warm_runs)
 
 
 if __name__ == "__main__":

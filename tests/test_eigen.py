@@ -89,20 +89,22 @@ def test_orthonormal_and_small_residuals(sphere_5k, mass):
     assert np.all(np.diff(basis.values) >= 0)
 
 
+@pytest.mark.parametrize("method", ["krylov", "chebyshev"])
 @pytest.mark.parametrize("potential", ["zero", "positive", "signed"])
-def test_krylov_matches_dense_generalized_eigh(small_mesh, potential):
+def test_sparse_solvers_match_dense_generalized_eigh(small_mesh, potential, method):
     rng = np.random.default_rng(4)
     V = {"zero": None, "positive": rng.random(400) * 30, "signed": rng.standard_normal(400) * 30}[potential]
     H, A = hamiltonian(small_mesh, V)
     reference = sla.eigh(H.toarray(), A.toarray(), eigvals_only=True)[:40]
-    basis = solve(small_mesh, 40, V, method="krylov")
+    basis = solve(small_mesh, 40, V, method=method)
     scale = np.abs(reference).max()
     np.testing.assert_allclose(basis.values, reference, rtol=1e-9, atol=1e-9 * scale)
     dense = solve(small_mesh, 40, V, method="dense")
     np.testing.assert_allclose(dense.values, reference, rtol=1e-9, atol=1e-9 * scale)
 
 
-def test_krylov_matches_dense_with_several_components_boundary_and_multiplicities():
+@pytest.mark.parametrize("method", ["krylov", "chebyshev"])
+def test_sparse_solvers_match_dense_with_several_components_boundary_and_multiplicities(method):
     # (scipy's eigsh with sigma=-0.01 misses one of the nine-fold sphere eigenvalues near 19.5 here)
     sphere = shapes.icosphere(3)
     plate = shapes.rectangle(1.5, 1.0, 30, 20)
@@ -110,7 +112,7 @@ def test_krylov_matches_dense_with_several_components_boundary_and_multiplicitie
     f = np.vstack([sphere.faces, plate.faces + sphere.n_vertices])
     mesh = hamsa.TriMesh(v, f)
     assert mesh.n_components == 2
-    basis = solve(mesh, 30, method="krylov")
+    basis = solve(mesh, 30, method=method)
     H, A = hamiltonian(mesh)
     reference = sla.eigh(H.toarray(), A.toarray(), eigvals_only=True)[:30]
     assert np.sum(np.abs(basis.values) < 1e-8) == 2  # one zero mode per component
@@ -139,6 +141,50 @@ def test_warm_start_equals_cold_start(sphere_5k):
     np.testing.assert_allclose(warm.values, fresh.values, rtol=1e-9)
     overlap = np.abs(warm.vectors.T @ warm.mass @ fresh.vectors)
     assert np.all(np.abs(np.linalg.svd(overlap[:15, :15], compute_uv=False)) > 1 - 1e-8)
+
+
+def test_solver_object_warm_starts_match_cold_solves_and_keep_signs(sphere_5k):
+    """HamiltonianEigensolver over a sequence of potentials: each warm-started result equals a cold
+    solve (values 1e-9, eigenvectors up to sign), signs follow the previous call, and the factorization's
+    symbolic analysis is reused."""
+    from hamsa.eigen import HamiltonianEigensolver
+
+    rng = np.random.default_rng(3)
+    mesh = hamsa.TriMesh(sphere_5k.vertices * (1 + 0.1 * sphere_5k.vertices[:, :1] ** 2), sphere_5k.faces)
+    solver = HamiltonianEigensolver.for_mesh(mesh, 12, method="krylov")
+    V = 4 * rng.random(mesh.n_vertices)
+    first = solver.solve(V)
+    symbolic = solver.factor._symbolic
+    V2 = V * (1 + 0.05 * rng.standard_normal(V.size))
+    second = solver.solve(V2)
+    fresh = solve(mesh, 12, V2)
+    np.testing.assert_allclose(second.values, fresh.values, rtol=1e-9)
+    np.testing.assert_allclose(np.abs(second.vectors.T @ second.mass @ fresh.vectors), np.eye(12), atol=1e-6)
+    assert solver.continues.tolist() == list(range(12))
+    assert np.all(np.diag(second.vectors.T @ second.mass @ first.vectors) > 0.9)  # signs kept
+    if symbolic is not None:
+        assert solver.factor._symbolic is symbolic
+
+
+def test_solver_object_reports_a_swap_of_crossing_eigenpairs():
+    """Two components, a constant potential c on the first: its constant mode (E = c) climbs past the
+    second component's first three modes; ``continues`` says which previous pair each new one is."""
+    from hamsa.eigen import HamiltonianEigensolver
+
+    sphere = shapes.icosphere(2)
+    ellipsoid = sphere.vertices * np.array([1.0, 1.1, 1.2])
+    n = sphere.n_vertices
+    mesh = hamsa.TriMesh(
+        np.vstack([sphere.vertices + [5.0, 0, 0], ellipsoid]), np.vstack([sphere.faces, sphere.faces + n])
+    )
+    on_first = np.r_[np.ones(n), np.zeros(n)]
+    solver = HamiltonianEigensolver.for_mesh(mesh, 5, method="dense")
+    low = solver.solve(1.0 * on_first)
+    assert np.isclose(low.values[1], 1.0) and low.values[2] > 1.0
+    high = solver.solve(3.0 * on_first)
+    assert np.isclose(high.values[4], 3.0) and high.values[3] < 3.0
+    assert solver.continues.tolist() == [0, 2, 3, 4, 1]
+    assert np.all(solver.overlap[np.arange(5), solver.continues] > 0.99)  # and with the same signs
 
 
 def test_save_and_load_round_trip(tmp_path, small_mesh):
@@ -195,3 +241,42 @@ def test_superlu_and_cholmod_backends_agree(sphere_5k):
     if HAVE_CHOLMOD:
         cholmod = solve(sphere_5k, 16, np.linspace(0, 4, sphere_5k.n_vertices), backend="cholmod")
         np.testing.assert_allclose(superlu.values, cholmod.values, rtol=1e-10)
+
+
+def test_chebyshev_refuses_a_full_mass_and_cpu_methods_on_the_gpu(small_mesh):
+    with pytest.raises(SolverError, match="lumped"):
+        hamsa.eigenbasis(small_mesh, 5, mass="full", method="chebyshev")
+    with pytest.raises(SolverError, match="chebyshev"):
+        hamsa.eigenbasis(small_mesh, 5, method="krylov", device="cuda")
+
+
+def _has_cuda():
+    try:
+        from hamsa.chebyshev import array_modules
+
+        array_modules("cuda")
+        return True
+    except Exception:
+        return False
+
+
+def test_gpu_without_cupy_says_which_extra_to_install(small_mesh):
+    if _has_cuda():
+        pytest.skip("CuPy and a GPU are present here")
+    with pytest.raises(hamsa.MissingDependencyError, match="gpu-cuda"):
+        hamsa.eigenbasis(small_mesh, 5, device="cuda")
+
+
+@pytest.mark.skipif(not _has_cuda(), reason="needs CuPy and a CUDA GPU (the GPU path is optional)")
+@pytest.mark.parametrize("potential", ["zero", "signed"])
+def test_gpu_solver_matches_the_cpu_solver(sphere_5k, potential):
+    rng = np.random.default_rng(6)
+    V = None if potential == "zero" else 20 * rng.standard_normal(sphere_5k.n_vertices)
+    gpu = solve(sphere_5k, 40, V, device="cuda")
+    cpu = solve(sphere_5k, 40, V, method="krylov")
+    assert gpu.info.method == "chebyshev"
+    np.testing.assert_allclose(gpu.values, cpu.values, rtol=1e-8, atol=1e-8 * np.abs(cpu.values).max())
+    assert relative_residuals(gpu).max() < 1e-8
+    # same subspace (the sphere has multiplicities: compare spans, not vectors)
+    inner = gpu.vectors[:, :35].T @ (gpu.mass @ cpu.vectors)
+    assert np.linalg.svd(inner, compute_uv=False).min() > 1 - 1e-6

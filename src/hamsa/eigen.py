@@ -20,8 +20,10 @@ Shift-invert block Krylov with thick restarts and a dense Rayleigh-Ritz, in the 
 
 All the dense work (orthogonalization, Rayleigh-Ritz) is BLAS-3 on blocks, and all sparse solves have
 many right-hand sides, which is where the speed over ARPACK's one-vector Lanczos comes from.
-Warm starts (``initial=``) put previous eigenvectors in the first block; a good start converges in one
-or two cycles (:class:`HamiltonianEigensolver` does this when only the potential changes).
+Warm starts (``initial=``): random combinations of the previous eigenvectors form the first block (a
+start rich in the wanted eigenvectors; the block stays narrow). :class:`HamiltonianEigensolver` does this
+when only the potential changes, and reuses the factorization's symbolic analysis. The gain is modest
+(Krylov convergence depends on the start only logarithmically): see ``benchmarks/eigensolve.py --warm``.
 
 Conventions: eigenvalues ascending; ``vectors.T @ A @ vectors = I``; each vector's sign is fixed so its
 first entry of magnitude above 1e-3 of its largest is positive (deterministic for a given mesh).
@@ -45,7 +47,7 @@ from hamsa.mesh import as_trimesh
 from hamsa.operators import MASS_KINDS, check_potential, hamiltonian
 from hamsa.resources import require_memory
 
-METHODS = ("auto", "krylov", "dense")
+METHODS = ("auto", "krylov", "dense", "chebyshev")
 _DENSE_MAX_N = 1500  # "auto" uses the dense solver up to this many vertices
 _DENSE_LIMIT_N = 20000  # beyond this a dense solve would need > 3 GB: refused
 _FORMAT_VERSION = 1
@@ -53,7 +55,8 @@ _FORMAT_VERSION = 1
 
 @dataclass(frozen=True)
 class SolveInfo:
-    """What a solve did: the method, the number of restart cycles and solves, residuals and time."""
+    """What a solve did: the method, restart cycles (Chebyshev: filter iterations), sparse solves
+    (Chebyshev: sparse matrix-vector products, counted per column), the largest relative residual, time."""
 
     method: str
     cycles: int = 0
@@ -229,6 +232,7 @@ def eigenbasis(
     backend: str = "auto",
     initial: np.ndarray | None = None,
     laplacian: str = "cotan",
+    device: str = "cpu",
 ) -> Eigenbasis:
     """The k smallest eigenpairs of the Hamiltonian ``(W + A diag(V)) psi = E A psi`` on a mesh.
 
@@ -243,9 +247,11 @@ def eigenbasis(
         V at each vertex, any sign (None: V = 0, the Laplace-Beltrami operator).
     mass : {"voronoi", "barycentric", "full"}
         The mass matrix (see :func:`hamsa.operators.mass_matrix`); "voronoi" is the paper's.
-    method : {"auto", "krylov", "dense"}
+    method : {"auto", "krylov", "dense", "chebyshev"}
         "krylov": the block shift-invert solver described in this module; "dense": LAPACK on dense
-        matrices (small meshes only); "auto": dense for n <= 1500, else krylov.
+        matrices (small meshes only); "chebyshev": factorization-free Chebyshev-filtered subspace
+        iteration (:mod:`hamsa.chebyshev`; lumped masses only), the GPU solver; "auto": dense for
+        n <= 1500, else krylov on the CPU and chebyshev on a GPU.
     tol : float
         Relative residual target, ``||H x - E A x|| <= tol * max(|E|, E_scale) * ||A x||``, where
         E_scale = 1e-2 |E_k| keeps the test meaningful for eigenvalues near 0.
@@ -256,6 +262,8 @@ def eigenbasis(
     laplacian : {"cotan", "intrinsic_delaunay"}
         "intrinsic_delaunay" for meshes with needles or very obtuse triangles (see
         :func:`hamsa.operators.intrinsic_delaunay_operators`; the ``[robust]`` extra).
+    device : {"cpu", "cuda"}
+        "cuda" solves on an NVIDIA GPU with CuPy (the ``[gpu-cuda12]`` / ``[gpu-cuda13]`` extras).
 
     Returns
     -------
@@ -286,6 +294,7 @@ def eigenbasis(
         backend=backend,
         initial=initial,
         spectral_scale=4 * np.pi / mesh.area,
+        device=device,
     )
     return Eigenbasis(values, vectors, A, potential, mass if laplacian == "cotan" else laplacian, info)
 
@@ -303,6 +312,7 @@ def generalized_eigsh(
     spectral_scale: float | None = None,
     factor: CholeskySolver | None = None,
     max_cycles: int = 200,
+    device: str = "cpu",
 ) -> tuple[np.ndarray, np.ndarray, SolveInfo]:
     """The k smallest eigenpairs of a sparse symmetric pencil ``H x = E A x`` with A positive definite.
 
@@ -318,7 +328,7 @@ def generalized_eigsh(
         lower bound. Estimated from the matrices when omitted.
     factor : CholeskySolver, optional
         A reusable factorization object; it is re-factored with ``H - sigma A``.
-    method, tol, backend, initial
+    method, tol, backend, initial, device
         As in :func:`eigenbasis`.
 
     Returns
@@ -336,10 +346,22 @@ def generalized_eigsh(
         raise SolverError(f"k = {k} eigenpairs requested, must be between 1 and the number of vertices n = {n}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if device == "cuda" and method not in ("auto", "chebyshev"):
+        raise SolverError(f"method {method!r} runs on the CPU; on device='cuda' use method='chebyshev' (or 'auto')")
     if method == "auto":
-        method = "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
+        method = "chebyshev" if device == "cuda" else "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
     start = time.perf_counter()
-    if method == "dense":
+    if method == "chebyshev":
+        from hamsa.chebyshev import chebyshev_eigsh
+
+        mass = _MassOperator(A)
+        if not mass.is_diagonal:
+            raise SolverError("method 'chebyshev' needs a lumped (diagonal) mass matrix; use 'krylov' for mass='full'")
+        values, vectors, details = chebyshev_eigsh(H, mass.diagonal, k, tol=tol, device=device, initial=initial)
+        info = SolveInfo(
+            "chebyshev", details["iterations"], details["products"] * details["block"], details["max_residual"]
+        )
+    elif method == "dense":
         if n > _DENSE_LIMIT_N:
             raise SolverError(
                 f"a dense eigensolve of n = {n} needs {3 * 8 * n * n / 1e9:.0f} GB; ask for fewer than n/3 "
@@ -406,17 +428,31 @@ class _MassOperator:
         return self.matrix @ X
 
 
-def _orthogonalize(Z, Q, AQ) -> tuple[np.ndarray, np.ndarray]:
-    """Remove from Z its A-projection on span(Q) (Q A-orthonormal, AQ = A Q).
+def _orthogonalize(Z, Q, AQ, mass) -> tuple[np.ndarray, np.ndarray]:
+    """Remove from Z its A-projection on span(Q) (Q A-orthonormal; AQ = A Q, or None when A is diagonal
+    and applied on the fly).
 
-    Classical Gram-Schmidt twice ("twice is enough", Kahan-Parlett), BLAS-3. Returns (Z_out, C)
-    with ``Z_in = Q @ C + Z_out``.
+    Classical Gram-Schmidt, BLAS-3, with the second pass ("twice is enough", Kahan-Parlett) only where
+    the first removed most of a column (the DGKS test: a column whose A-norm fell below 1/sqrt(2) of
+    its start). Returns (Z_out, C) with ``Z_in = Q @ C + Z_out``.
     """
-    coefficients = AQ.T @ Z
+
+    def coefficients_of(X):
+        return Q.T @ mass(X) if AQ is None else AQ.T @ X
+
+    before = np.einsum("ij,ij->j", Z, mass(Z))
+    coefficients = coefficients_of(Z)
     Z = Z - Q @ coefficients
-    correction = AQ.T @ Z
-    Z -= Q @ correction
-    return Z, coefficients + correction
+    after = np.einsum("ij,ij->j", Z, mass(Z))
+    if np.any(after < 0.5 * before):
+        correction = coefficients_of(Z)
+        Z -= Q @ correction
+        coefficients += correction
+    return Z, coefficients
+
+
+def _columns(matrix, stop):
+    return None if matrix is None else matrix[:, :stop]
 
 
 def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
@@ -444,7 +480,12 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     rng = np.random.default_rng(12345)
     start = rng.standard_normal((n, block))
     if initial is not None:
+        # A wide start block would make every Krylov block as wide (measured on 50k vertices, k = 100:
+        # 4x slower than cold). Random combinations of the start vectors keep the block narrow and the
+        # start rich in the wanted eigenvectors and poor in the others.
         initial = np.asarray(initial, dtype=np.float64).reshape(n, -1)
+        if initial.shape[1] > block:
+            initial = initial @ rng.standard_normal((initial.shape[1], block))
         start = np.hstack([initial, start[:, : max(0, block - initial.shape[1])]])
     first, _, _ = _orthonormalize(start, mass, 1e-8 * np.linalg.norm(start, axis=0).max())
     width = first.shape[1]
@@ -452,12 +493,17 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     capacity = min(n, max(wanted + 5 * width, 3 * wanted))
     if capacity < n and wanted + 2 * width > capacity:
         raise SolverError(f"k = {k} is too large for the sparse solver on n = {n}: use method='dense'")
-    require_memory(2 * 8 * n * capacity, f"the Krylov basis for k = {k} eigenpairs of n = {n} (2 x {capacity} columns)")
+    # A Q is kept only for a full mass matrix; a diagonal one is applied on the fly (half the memory)
+    copies = 1 if mass.is_diagonal else 2
+    require_memory(
+        copies * 8 * n * capacity, f"the Krylov basis for k = {k} eigenpairs of n = {n} ({copies} x {capacity} columns)"
+    )
     Q = np.empty((n, capacity), order="F")  # column blocks are contiguous
-    AQ = np.empty((n, capacity), order="F")
+    AQ = None if mass.is_diagonal else np.empty((n, capacity), order="F")
     T = np.zeros((capacity, capacity))
     Q[:, :width] = first[:, :width]
-    AQ[:, :width] = mass(Q[:, :width])
+    if AQ is not None:
+        AQ[:, :width] = mass(Q[:, :width])
     f0, f1 = 0, width  # frontier columns
     solves, cycles = 0, 1
     since_check, check_every = 0, max(1, wanted // (4 * block))
@@ -466,7 +512,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
         Z = factor.solve(mass(frontier))
         solves += f1 - f0
         floor = 1e-13 * np.sqrt(np.einsum("ij,ij->j", Z, mass(Z))).max()
-        Z, coefficients = _orthogonalize(Z, Q[:, :f1], AQ[:, :f1])
+        Z, coefficients = _orthogonalize(Z, Q[:, :f1], _columns(AQ, f1), mass)
         T[:f1, f0:f1] = coefficients
         T[f0:f1, :f1] = coefficients.T
         T[f0:f1, f0:f1] = (coefficients[f0:f1] + coefficients[f0:f1].T) / 2
@@ -475,7 +521,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
         if Qn.shape[1] > room:  # only when the basis is the whole space (capacity == n): S Q is in span(Q)
             Qn, AQn, B = Qn[:, :0], AQn[:, :0], B[:0]
         if Qn.shape[1] == 0 and room > 0:  # an invariant subspace: continue from fresh random directions
-            Z, _ = _orthogonalize(rng.standard_normal((n, min(block, room))), Q[:, :f1], AQ[:, :f1])
+            Z, _ = _orthogonalize(rng.standard_normal((n, min(block, room))), Q[:, :f1], _columns(AQ, f1), mass)
             Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
             B = np.zeros((Qn.shape[1], f1 - f0))
         bn = Qn.shape[1]
@@ -512,7 +558,8 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
                 )
             p = m
             Q[:, :p] = Q[:, :f1] @ Y[:, :p]
-            AQ[:, :p] = AQ[:, :f1] @ Y[:, :p]
+            if AQ is not None:
+                AQ[:, :p] = AQ[:, :f1] @ Y[:, :p]
             T[:] = 0.0
             T[np.arange(p), np.arange(p)] = theta[:p]
             T[p : p + bn, :p] = W
@@ -521,4 +568,123 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
         else:
             f0, f1 = f1, f1 + bn
         Q[:, f0:f1] = Qn
-        AQ[:, f0:f1] = AQn
+        if AQ is not None:
+            AQ[:, f0:f1] = AQn
+
+
+class HamiltonianEigensolver:
+    """The k smallest eigenpairs of ``(W + A diag(V)) psi = E A psi`` for a sequence of potentials.
+
+    For loops that change only the potential (potential optimization, continuation, robustness
+    sweeps). Each :meth:`solve` reuses what the last one left: the operators W and A, the symbolic
+    analysis of the sparse Cholesky factorization (a new V changes only the diagonal), and the last
+    eigenvectors as the Krylov start (a warm start). It also keeps eigenpairs recognizable across
+    calls: each new eigenvector's sign is chosen to agree with the previous eigenvector it overlaps
+    most, and :attr:`continues` says which previous eigenpair each new one continues (eigenvalues stay
+    ascending, so two pairs that cross swap places and ``continues`` shows it).
+
+    Parameters
+    ----------
+    stiffness, mass : sparse (n, n)
+        W and A (see :func:`hamsa.operators.stiffness_matrix`, :func:`hamsa.operators.mass_matrix`).
+    k : int
+    tol, method, backend, device
+        As in :func:`eigenbasis` (on ``device="cuda"`` the warm start is the Chebyshev block's start).
+    mass_kind : str
+        Recorded in the returned bases.
+
+    Examples
+    --------
+    >>> import numpy as np, hamsa
+    >>> mesh = hamsa.shapes.capsule()  # a capsule along x
+    >>> solver = HamiltonianEigensolver.for_mesh(mesh, k=3)
+    >>> first = solver.solve()  # the LBO
+    >>> second = solver.solve(0.5 * mesh.vertices[:, 0] ** 2)  # warm-started
+    >>> solver.continues.tolist()  # each eigenpair continues the one at the same place
+    [0, 1, 2]
+    >>> bool(np.all(np.diag(solver.overlap) > 0.99))  # with the same signs
+    True
+    """
+
+    def __init__(
+        self,
+        stiffness,
+        mass,
+        k: int,
+        *,
+        tol: float = 1e-10,
+        method: str = "auto",
+        backend: str = "auto",
+        mass_kind: str = "voronoi",
+        spectral_scale: float | None = None,
+        device: str = "cpu",
+    ):
+        self.stiffness = sp.csr_matrix(stiffness)
+        self.mass = sp.csr_matrix(mass)
+        self.k, self.tol, self.method, self.backend, self.device = k, tol, method, backend, device
+        self.mass_kind = mass_kind
+        self.spectral_scale = spectral_scale
+        self.factor: CholeskySolver | None = None
+        self.basis: Eigenbasis | None = None
+        self.continues: np.ndarray | None = None
+        self.overlap: np.ndarray | None = None
+
+    @classmethod
+    def for_mesh(cls, mesh, k: int, mass: str = "voronoi", **options) -> HamiltonianEigensolver:
+        """A solver on a mesh's cotangent stiffness and lumped mass (``mass`` "voronoi" or "barycentric")."""
+        from hamsa.operators import mass_matrix, stiffness_matrix
+
+        mesh = as_trimesh(mesh)
+        if mass not in ("voronoi", "barycentric"):
+            raise HamsaError(f"HamiltonianEigensolver needs a lumped mass ('voronoi' or 'barycentric'), got {mass!r}")
+        return cls(
+            stiffness_matrix(mesh),
+            mass_matrix(mesh, mass),
+            k,
+            mass_kind=mass,
+            spectral_scale=4 * np.pi / mesh.area,
+            **options,
+        )
+
+    def solve(self, potential=None) -> Eigenbasis:
+        """The eigenbasis for potential V (n,) (None: V = 0), warm-started from the previous call."""
+        n = self.stiffness.shape[0]
+        V = np.zeros(n) if potential is None else check_potential(potential, n)
+        H = self.stiffness + self.mass @ sp.diags(V)
+        method = self.method
+        if method == "auto":
+            method = (
+                "chebyshev"
+                if self.device == "cuda"
+                else "dense"
+                if (n <= _DENSE_MAX_N or 3 * self.k >= n)
+                else "krylov"
+            )
+        if method == "krylov" and self.factor is None:
+            shift = float(V.min()) - (self.spectral_scale or 1.0)
+            self.factor = CholeskySolver((H - shift * self.mass).tocsc(), self.backend)
+        previous = self.basis
+        values, vectors, info = generalized_eigsh(
+            H,
+            self.mass,
+            self.k,
+            lower_bound=float(V.min()),
+            method=method,
+            tol=self.tol,
+            backend=self.backend,
+            initial=None if previous is None else previous.vectors,
+            spectral_scale=self.spectral_scale,
+            factor=self.factor if method == "krylov" else None,
+            device=self.device,
+        )
+        if previous is None:
+            self.continues, self.overlap = np.arange(self.k), None
+        else:
+            self.overlap = vectors.T @ (self.mass @ previous.vectors)  # (k, k) A-inner products
+            self.continues = np.argmax(np.abs(self.overlap), axis=1)
+            signs = np.sign(self.overlap[np.arange(self.k), self.continues])
+            signs[signs == 0] = 1.0
+            vectors *= signs
+            self.overlap *= signs[:, None]
+        self.basis = Eigenbasis(values, vectors, self.mass, V if potential is not None else None, self.mass_kind, info)
+        return self.basis

@@ -34,7 +34,7 @@ import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
-from hamsa.eigen import Eigenbasis, generalized_eigsh
+from hamsa.eigen import Eigenbasis, HamiltonianEigensolver, generalized_eigsh
 from hamsa.errors import HamsaError
 from hamsa.mesh import TriMesh
 from hamsa.operators import hamiltonian
@@ -263,13 +263,13 @@ def optimize_potential(
         )
         bar.update(len(history), loss, history[-1]["gradient_norm"])
 
+    # m eigenvectors of H(V) at every re-centering, warm-started from the last ones. A loose tolerance
+    # suffices (the stiffness is projected exactly onto whatever basis we get).
+    solver = HamiltonianEigensolver(W, A, m, tol=1e-5, method="dense" if m >= n - 1 or n <= 1500 else "auto")
+
     def subspace(V):
-        """m eigenvectors of H(V): the reduced problem is accurate near V. A loose tolerance suffices
-        (the stiffness is projected exactly onto whatever basis we get)."""
-        method = "dense" if m >= n - 1 or n <= 1500 else "auto"
-        _, vectors, _ = generalized_eigsh(
-            W + A @ sp.diags(V), A, m, tol=1e-5, lower_bound=float(V.min()), method=method
-        )
+        """The reduced problem around V: accurate near V."""
+        vectors = solver.solve(V).vectors
         return ReducedRepresentationProblem(vectors.T @ (W @ vectors), vectors, a, X, k, epsilon)
 
     x = np.zeros(n) if parametrization == "signed" else np.full(n, 1e-3)

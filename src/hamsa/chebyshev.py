@@ -1,0 +1,176 @@
+"""Chebyshev-filtered subspace iteration: the eigensolver for GPUs (and for factorization-free runs).
+
+With a lumped (diagonal) mass A = diag(a), ``H psi = E A psi`` is the standard symmetric problem
+``M y = E y`` with ``M = A^(-1/2) H A^(-1/2)`` and ``y = A^(1/2) psi``. A block of m = k + guard
+orthonormal vectors is improved by
+
+1. a Chebyshev filter p(M) of degree d (Zhou & Saad 2007, "A Chebyshev-Davidson algorithm for large
+   symmetric eigenproblems"; Zhou, Saad, Tiago & Chelikowsky 2006 for the scaled three-term recurrence):
+   the Chebyshev polynomial of the interval ``[cut, upper]`` holding the unwanted spectrum stays within
+   [-1, 1] there and grows like ``cosh(d acosh(1 + 2 (cut - E) / (upper - cut)))`` below it, so every
+   wanted component is amplified over every unwanted one. ``upper`` is a Gershgorin bound on the largest
+   eigenvalue; ``cut`` is the block's largest Ritz value;
+2. orthonormalization (QR) and Rayleigh-Ritz on the block, with the true residuals
+   ``||M y - E y|| = ||H psi - E A psi||_{A^-1}`` (the measure of :mod:`hamsa.eigen`).
+
+Only sparse products and dense block operations: no factorization, so it runs on a GPU through CuPy
+(cuSPARSE SpMM, cuBLAS, cuSOLVER) with the same code as on the CPU through NumPy/SciPy. On a CPU the
+factorized Krylov solver of :mod:`hamsa.eigen` is faster; on a GPU this one is (see
+``benchmarks/eigensolve.py --gpu``). The degree is set from the spectrum so that the lowest Ritz value
+is amplified at most ~1e8 over the cut per iteration (keeping the block well conditioned in float64).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+from hamsa.errors import MissingDependencyError, SolverError
+
+DEVICES = ("cpu", "cuda")
+_MAX_AMPLIFICATION = 1e8
+
+
+def array_modules(device: str):
+    """(array module, sparse module) for a device: NumPy/SciPy on "cpu", CuPy on "cuda"."""
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {DEVICES}, got {device!r}")
+    if device == "cpu":
+        return np, sp
+    try:
+        import cupy
+        import cupyx.scipy.sparse as cupy_sparse
+
+        if cupy.cuda.runtime.getDeviceCount() < 1:
+            raise RuntimeError("no CUDA device")
+    except Exception as exc:  # ImportError, or CuPy without a usable GPU
+        raise MissingDependencyError(
+            f"the GPU eigensolver needs CuPy and a CUDA GPU ({type(exc).__name__}: {exc}); install the CuPy "
+            "build for your CUDA: pip install 'hamsa[gpu-cuda12]' or 'hamsa[gpu-cuda13]'"
+        ) from None
+    return cupy, cupy_sparse
+
+
+def chebyshev_eigsh(
+    H: sp.spmatrix,
+    mass_diagonal: np.ndarray,
+    k: int,
+    *,
+    tol: float = 1e-10,
+    device: str = "cpu",
+    initial: np.ndarray | None = None,
+    guard: int | None = None,
+    max_iterations: int = 300,
+    seed: int = 12345,
+):
+    """The k smallest eigenpairs of ``H psi = E diag(a) psi`` by Chebyshev-filtered subspace iteration.
+
+    Parameters
+    ----------
+    H : scipy sparse (n, n)
+        Symmetric.
+    mass_diagonal : (n,) positive
+        The lumped masses a.
+    k : int
+    tol : float
+        Relative residual target, as in :func:`hamsa.eigen.eigenbasis`.
+    device : {"cpu", "cuda"}
+        "cuda" runs every step on the GPU with CuPy.
+    initial : (n, p), optional
+        Start vectors (previous eigenvectors: a warm start).
+    guard : int, optional
+        Extra vectors in the block (default max(10, k // 4)): more converge faster near the k-th.
+
+    Returns
+    -------
+    values (k,), vectors (n, k) NumPy arrays with ``vectors.T @ diag(a) @ vectors = I``, and a dict with
+    ``iterations``, ``products`` (sparse block products), ``max_residual``, ``seconds``.
+    """
+    start_time = time.perf_counter()
+    xp, xsp = array_modules(device)
+    n = H.shape[0]
+    mass_diagonal = np.asarray(mass_diagonal, dtype=np.float64)
+    if mass_diagonal.shape != (n,) or not np.all(mass_diagonal > 0):
+        raise SolverError(f"the Chebyshev solver needs a positive lumped mass of shape ({n},)")
+    guard = max(10, k // 4) if guard is None else guard
+    m = min(k + guard, n)
+    if not 1 <= k <= m:
+        raise SolverError(f"k = {k} eigenpairs requested, must be between 1 and the number of vertices n = {n}")
+    scale = 1.0 / np.sqrt(mass_diagonal)
+    M_host = sp.diags(scale) @ sp.csr_matrix(H, dtype=np.float64) @ sp.diags(scale)
+    upper = float(abs(M_host).sum(axis=1).max())  # Gershgorin: >= the largest eigenvalue
+    M = xsp.csr_matrix(M_host.tocsr()) if device == "cuda" else M_host.tocsr()
+
+    rng = np.random.default_rng(seed)
+    block = rng.standard_normal((n, m))
+    if initial is not None:
+        initial = np.asarray(initial, dtype=np.float64).reshape(n, -1)[:, :m]
+        block[:, : initial.shape[1]] = initial * np.sqrt(mass_diagonal)[:, None]
+    X = xp.linalg.qr(xp.asarray(block))[0]
+    del block
+    products, iterations = 0, 0
+    while True:
+        MX = M @ X
+        products += 1
+        gram = X.T @ MX
+        theta, Y = xp.linalg.eigh((gram + gram.T) / 2)
+        X, MX = X @ Y, MX @ Y
+        residual = xp.linalg.norm(MX[:, :k] - X[:, :k] * theta[:k], axis=0)
+        theta_host = xp.asnumpy(theta) if device == "cuda" else theta
+        residual_host = xp.asnumpy(residual) if device == "cuda" else residual
+        size = np.maximum(np.abs(theta_host[:k]), 1e-2 * abs(theta_host[k - 1]))
+        relative = residual_host / np.maximum(size, 1e-300)
+        if np.all(relative <= tol):
+            break
+        iterations += 1
+        if iterations > max_iterations:
+            raise SolverError(
+                f"Chebyshev eigensolver did not converge in {max_iterations} iterations: largest relative "
+                f"residual {relative.max():.2e} > tol {tol:.1e}"
+            )
+        lowest, cut = float(theta_host[0]), float(theta_host[-1])
+        if not cut < upper:
+            raise SolverError("the block reached the top of the spectrum: ask for fewer eigenpairs (k << n)")
+        degree = _filter_degree(lowest, cut, upper)
+        X = _chebyshev_filter(M, X, MX, degree, lowest, cut, upper)
+        products += degree - 1
+        X = xp.linalg.qr(X)[0]
+    del MX
+    vectors = X[:, :k] * xp.asarray(scale)[:, None]
+    if device == "cuda":
+        vectors, theta_host = xp.asnumpy(vectors), theta_host
+    info = {
+        "iterations": iterations,
+        "products": products,
+        "max_residual": float(relative.max()),
+        "seconds": time.perf_counter() - start_time,
+        "block": m,
+    }
+    return np.asarray(theta_host[:k], dtype=np.float64), np.asarray(vectors), info
+
+
+def _filter_degree(lowest: float, cut: float, upper: float) -> int:
+    """The largest degree whose amplification of the lowest Ritz value stays below ~1e8."""
+    half_width = (upper - cut) / 2
+    x = 1 + (cut - lowest) / half_width
+    return int(np.clip(np.arccosh(_MAX_AMPLIFICATION) / np.arccosh(max(x, 1 + 1e-12)), 4, 600))
+
+
+def _chebyshev_filter(M, X, MX, degree: int, lowest: float, cut: float, upper: float):
+    """p(M) X for the degree-d Chebyshev polynomial of [cut, upper], scaled so p(lowest) = 1.
+
+    The scaled three-term recurrence (Zhou et al. 2006, Algorithm 4.1) keeps every iterate of order
+    one; ``MX = M @ X`` is passed in (it is known from the Rayleigh-Ritz step).
+    """
+    half_width = (upper - cut) / 2
+    center = (upper + cut) / 2
+    sigma = half_width / (lowest - center)
+    sigma_first = sigma
+    Y = (MX - center * X) * (sigma / half_width)
+    for _ in range(2, degree + 1):
+        sigma_next = 1.0 / (2.0 / sigma_first - sigma)
+        Y_next = (M @ Y - center * Y) * (2.0 * sigma_next / half_width) - (sigma * sigma_next) * X
+        X, Y, sigma = Y, Y_next, sigma_next
+    return Y
