@@ -93,6 +93,9 @@ def _parser() -> argparse.ArgumentParser:
         default="cotan",
         help="intrinsic_delaunay: robust to needles and obtuse triangles (needs the [robust] extra)",
     )
+    basis.add_argument(
+        "--device", choices=("cpu", "cuda"), default="cpu", help="cuda: solve on an NVIDIA GPU (CuPy; [gpu-cuda12])"
+    )
     basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
 
     optimize = commands.add_parser(
@@ -251,7 +254,9 @@ def _basis(args) -> None:
     mesh = _load_for_operators(args.mesh, args.repair)
     loaded = time.perf_counter()
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
-    basis = eigenbasis(mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian)
+    basis = eigenbasis(
+        mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian, device=args.device
+    )
     solved = time.perf_counter()
     basis.save(output)
     done = time.perf_counter()
