@@ -11,6 +11,7 @@ from hamsa.matching import (
     icp_refine,
     map_from_functional,
     match_descriptors,
+    match_icskm,
     zoomout,
 )
 
@@ -69,7 +70,63 @@ def test_direction_conventions_and_errors(pair):
         map_from_functional(np.zeros((3, 3)), source, target)
 
 
-@pytest.mark.parametrize("method", ["fmap", "hks", "wks"])
+def test_icskm_recovers_an_isometry_from_one_landmark(pair):
+    """ICSKM from a single landmark pair, with the LBO and with the Hamiltonian of the landmark potential
+    (V = geodesic distance from the landmark): both recover the isometry."""
+    from hamsa import potentials
+
+    flat, rolled = pair
+    landmark = np.array([0])
+    everything = np.arange(flat.n_vertices)
+    for V in (None, (potentials.geodesic_distance(flat, landmark), potentials.geodesic_distance(rolled, landmark))):
+        source = hamsa.eigenbasis(flat, 30, None if V is None else V[0])
+        target = hamsa.eigenbasis(rolled, 30, None if V is None else V[1])
+        C, mapping = match_icskm(source, target, landmark, landmark)
+        assert np.abs(C @ C.T - np.eye(30)).max() < 1e-10  # orthogonal
+        assert summary(geodesic_errors(rolled, mapping, everything))["mean_error"] < 0.02  # measured 0.004
+    with pytest.raises(HamsaError, match="matched"):
+        match_icskm(source, target, [0, 1], [0])
+    with pytest.raises(HamsaError, match="not a vertex"):
+        match_icskm(source, target, [flat.n_vertices], [0])
+    with pytest.raises(HamsaError, match="same size"):
+        match_icskm(source, target.truncate(20), [0], [0])
+
+
+@pytest.mark.data
+def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark():
+    """NOTES T14 (ICSKM): three ground-truth landmarks put ICSKM below 0.05 mean error on a SCAPE pair with
+    either basis; from a single landmark the LBO version flips left and right while the Hamiltonian with
+    V = geodesic distance from the landmark does not."""
+    from hamsa import potentials
+    from hamsa.evaluation import sample_points
+
+    from conftest import data_mesh
+
+    def unit(mesh):
+        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
+
+    source = unit(data_mesh("scape/meshes/mesh000.off.gz"))
+    points = sample_points(source.n_vertices, 1000)
+    for name, count, expected in (("mesh001", 3, "both"), ("mesh030", 1, "hamiltonian")):
+        target = unit(data_mesh(f"scape/meshes/{name}.off.gz"))
+        landmarks = np.random.default_rng(1).choice(source.n_vertices, count, replace=False)
+        errors = {}
+        for basis in ("lbo", "hamiltonian"):
+            V = [None, None]
+            if basis == "hamiltonian":
+                V = [potentials.geodesic_distance(mesh, landmarks) for mesh in (source, target)]
+            bases = hamsa.eigenbasis(source, 50, V[0]), hamsa.eigenbasis(target, 50, V[1])
+            _, mapping = match_icskm(*bases, landmarks, landmarks)
+            errors[basis] = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
+        # measured: mesh001, 3 landmarks: LBO 0.018, H 0.018; mesh030, 1 landmark: LBO 0.49, H 0.018
+        assert errors["hamiltonian"] < 0.05, errors
+        if expected == "both":
+            assert errors["lbo"] < 0.05, errors
+        else:
+            assert errors["lbo"] > 0.2, errors
+
+
+@pytest.mark.parametrize("method", ["fmap", "hks", "wks", "icskm"])
 def test_cli_match(tmp_path, pair, method):
     from hamsa.cli import main
 
@@ -77,10 +134,9 @@ def test_cli_match(tmp_path, pair, method):
     hamsa.save_mesh(flat, tmp_path / "flat.ply")
     hamsa.save_mesh(rolled, tmp_path / "rolled.ply")
     out = tmp_path / "map.npy"
-    assert (
-        main(["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--method", method, "-o", str(out)])
-        == 0
-    )
+    extra = ["--landmarks", "0:0"] if method == "icskm" else []
+    command = ["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--method", method, "-o", str(out)]
+    assert main(command + extra) == 0
     mapping = np.load(out)
     errors = geodesic_errors(rolled, mapping, np.arange(flat.n_vertices))
     assert summary(errors)["within_0.05"] > 0.9
@@ -175,3 +231,21 @@ def test_nearest_rows_equals_a_kd_tree(dimension):
     rng = np.random.default_rng(dimension)
     points, queries = rng.standard_normal((700, dimension)), rng.standard_normal((3000, dimension))
     np.testing.assert_array_equal(nearest_rows(queries, points, chunk=512), cKDTree(points).query(queries)[1])
+
+
+def test_cli_match_refuses_bad_landmarks(tmp_path, pair, capsys):
+    from hamsa.cli import main
+
+    flat, rolled = pair
+    hamsa.save_mesh(flat, tmp_path / "flat.ply")
+    hamsa.save_mesh(rolled, tmp_path / "rolled.ply")
+    base = ["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "-o", str(tmp_path / "m.npy")]
+    for extra, message in (
+        (["--method", "icskm"], "needs --landmarks"),
+        (["--method", "icskm", "--landmarks", "3-4"], "is not 'source_vertex:target_vertex'"),
+        (["--method", "icskm", "--landmarks", f"0:{rolled.n_vertices}"], "target vertex"),
+        (["--method", "hks", "--landmarks", "0:0"], "is for --method icskm"),
+    ):
+        assert main(base + extra) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "m.npy").exists()

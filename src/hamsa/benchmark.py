@@ -7,7 +7,10 @@ matchers and scores them by the Kim et al. protocol (geodesic error on the targe
 symmetries, on a seeded sample of source vertices):
 
 * ``hks`` / ``wks``: nearest neighbours of the heat / wave kernel signatures;
-* ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k.
+* ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
+* ``icskm``: iterative closest spectral kernel maps from ``landmarks`` ground-truth pairs drawn at random
+  (seeded); its Hamiltonian is the paper's landmark potential, V = geodesic distance from the landmarks
+  (normalized to [0, 1]) on each shape.
 
 :func:`benchmark_dataset` runs every evaluation pair of a :class:`~hamsa.datasets.Dataset` in parallel
 (joblib processes; a Dask cluster through joblib's backend when given a scheduler address) with a
@@ -32,16 +35,17 @@ from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
 from hamsa.io import atomic_write
-from hamsa.matching import functional_map, icp_refine, match_descriptors, resolve_signs, zoomout
+from hamsa.matching import functional_map, icp_refine, match_descriptors, match_icskm, resolve_signs, zoomout
 from hamsa.mesh import TriMesh
 
-METHODS = ("hks", "wks", "fmap")
+METHODS = ("hks", "wks", "fmap", "icskm")
 BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
 
 
-def match_pair(method: str, source, target) -> np.ndarray:
-    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases."""
+def match_pair(method: str, source, target, landmarks=None) -> np.ndarray:
+    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (and for
+    ``icskm`` the landmark pairs ``(source ids, target ids)``)."""
     if method == "hks":
         times = default_hks_times(source, 50)
         return match_descriptors(
@@ -60,6 +64,10 @@ def match_pair(method: str, source, target) -> np.ndarray:
         )
         _, initial = icp_refine(C, *small)
         return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
+    if method == "icskm":
+        if landmarks is None:
+            raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
+        return match_icskm(source, target, *landmarks)[1]
     raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
 
 
@@ -87,8 +95,12 @@ def evaluate_pair(
     points: int = 1000,
     seed: int = 0,
     cache_dir=None,
+    landmarks: int = 3,
 ) -> dict:
-    """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}."""
+    """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
+
+    ``landmarks``: ground-truth pairs given to ``icskm`` (drawn with ``seed`` among the vertices that have
+    a true image; the same for both bases)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
@@ -96,10 +108,22 @@ def evaluate_pair(
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
     bases = paired_bases(source, target, truth, k, cache_dir)
+    pairs = None
+    if "icskm" in methods:
+        p = np.random.default_rng(seed + 1).choice(candidates, landmarks, replace=False)
+        pairs = (p, truth[p])
+        V_s, V_t = potentials.geodesic_distance(source, p), potentials.geodesic_distance(target, truth[p])
+        solve = (lambda mesh, V: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
+            lambda mesh, V: eigenbasis(mesh, k, V)
+        )  # fmt: skip
+        landmark_bases = {"lbo": bases["lbo"], "hamiltonian": (solve(source, V_s), solve(target, V_t))}
     rows, curves = [], {}
     for method in methods:
         for basis in BASES:
-            mapping = match_pair(method, *bases[basis])
+            if method == "icskm":
+                mapping = match_pair(method, *landmark_bases[basis], landmarks=pairs)
+            else:
+                mapping = match_pair(method, *bases[basis])
             errors = distances.errors(mapping[chosen])
             rows.append({"method": method, "basis": basis, **summary(errors)})
             curves.setdefault(method, {})[basis] = error_curve(errors).tolist()
@@ -134,7 +158,14 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
     source, target = _unit_area(source), _unit_area(target)
     truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
     result = evaluate_pair(
-        source, target, truth, settings["k"], settings["methods"], settings["points"], cache_dir=settings["cache"]
+        source,
+        target,
+        truth,
+        settings["k"],
+        settings["methods"],
+        settings["points"],
+        cache_dir=settings["cache"],
+        landmarks=settings.get("landmarks", 3),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     with atomic_write(path, "w") as handle:
@@ -169,6 +200,7 @@ def benchmark_dataset(
     limit: int | None = None,
     scheduler: str | None = None,
     progress: bool = True,
+    landmarks: int = 3,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -181,6 +213,7 @@ def benchmark_dataset(
     jobs : parallel worker processes (joblib); scheduler : a Dask scheduler address ("tcp://host:8786")
         to run the pairs on a cluster instead (needs ``dask.distributed``)
     limit : at most this many pairs per class
+    landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -188,6 +221,8 @@ def benchmark_dataset(
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
+    if "icskm" in methods:
+        settings["landmarks"] = int(landmarks)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):

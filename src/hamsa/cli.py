@@ -141,9 +141,23 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("target", help="target mesh file")
     match.add_argument(
         "--method",
-        choices=("fmap", "hks", "wks"),
+        choices=("fmap", "hks", "wks", "icskm"),
         default="fmap",
-        help="fmap: HKS-fitted functional map + ICP (default); hks / wks: descriptor nearest neighbours",
+        help="fmap: HKS-fitted functional map + ICP + ZoomOut (default); hks / wks: descriptor nearest neighbours; "
+        "icskm: iterative closest spectral kernel maps from --landmarks",
+    )
+    match.add_argument(
+        "--landmarks",
+        nargs="+",
+        metavar="S:T",
+        help="icskm: known pairs 'source_vertex:target_vertex' (0-based), e.g. --landmarks 12:40 300:310",
+    )
+    match.add_argument(
+        "--potential-scale",
+        type=float,
+        default=1.0,
+        help="icskm: mu of the Hamiltonian basis, V = mu x geodesic distance from the landmarks in [0, 1] "
+        "(default 1; 0 = the LBO)",
     )
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
@@ -153,7 +167,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("dataset", help="dataset folder (TOSCA or SCAPE layout, or a folder of meshes)")
     bench.add_argument("--kind", choices=("auto", "tosca", "scape", "folder"), default="auto")
-    bench.add_argument("--method", nargs="+", choices=("hks", "wks", "fmap"), default=["hks", "wks", "fmap"])
+    bench.add_argument(
+        "--method", nargs="+", choices=("hks", "wks", "fmap", "icskm"), default=["hks", "wks", "fmap", "icskm"]
+    )
+    bench.add_argument(
+        "--landmarks", type=_positive_int, default=3, help="icskm: ground-truth landmark pairs per pair (default 3)"
+    )
     bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
     bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
     bench.add_argument("--jobs", type=_positive_int, default=1, help="parallel worker processes (default 1)")
@@ -385,10 +404,10 @@ def _modes(args) -> None:
 
 
 def _match(args) -> None:
-    from hamsa.diffusion import default_hks_times, heat_kernel_signature, wave_kernel_signature
+    from hamsa import potentials
+    from hamsa.benchmark import match_pair
     from hamsa.eigen import eigenbasis
     from hamsa.io import atomic_write, load_mesh
-    from hamsa.matching import functional_map, icp_refine, match_descriptors
     from hamsa.mesh import TriMesh
 
     output = _output_path(args.output, ".npy")
@@ -397,17 +416,16 @@ def _match(args) -> None:
     for path in (args.source, args.target):
         mesh = load_mesh(path)
         meshes.append(TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces))  # unit area: comparable spectra
-    k = args.k if args.method != "wks" else max(args.k, 60)
-    source, target = (eigenbasis(mesh, k) for mesh in meshes)
-    if args.method == "wks":
-        mapping = match_descriptors(wave_kernel_signature(source), wave_kernel_signature(target))
+    landmarks = _landmark_pairs(args.landmarks, meshes) if args.method == "icskm" else None
+    if args.method != "icskm" and args.landmarks:
+        raise HamsaError("--landmarks is for --method icskm")
+    k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
+    if args.method == "icskm" and args.potential_scale != 0:
+        V = [args.potential_scale * potentials.geodesic_distance(m, ids) for m, ids in zip(meshes, landmarks)]
+        source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
     else:
-        times = default_hks_times(source, 30)
-        F, G = heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-        if args.method == "hks":
-            mapping = match_descriptors(F, G)
-        else:
-            _, mapping = icp_refine(functional_map(source, target, F, G), source, target)
+        source, target = (eigenbasis(mesh, k) for mesh in meshes)
+    mapping = match_pair(args.method, source, target, landmarks)
     with atomic_write(output) as handle:
         np.save(handle, mapping)
     print(
@@ -415,6 +433,24 @@ def _match(args) -> None:
         f"(k = {k}) in {time.perf_counter() - start:.1f} s"
     )
     print(f"wrote           {output}")
+
+
+def _landmark_pairs(texts, meshes) -> tuple[np.ndarray, np.ndarray]:
+    """'S:T' strings -> (source ids, target ids), checked against the two meshes."""
+    if not texts:
+        raise HamsaError("--method icskm needs --landmarks S:T [S:T ...] (known source:target vertex pairs)")
+    pairs = []
+    for text in texts:
+        try:
+            s, t = (int(part) for part in text.split(":"))
+        except ValueError:
+            raise HamsaError(f"landmark {text!r} is not 'source_vertex:target_vertex' (two integers)") from None
+        for vertex, mesh, side in ((s, meshes[0], "source"), (t, meshes[1], "target")):
+            if not 0 <= vertex < mesh.n_vertices:
+                raise HamsaError(f"landmark {text!r}: {side} vertex {vertex} is not in 0..{mesh.n_vertices - 1}")
+        pairs.append((s, t))
+    ids = np.array(pairs, dtype=np.int64)
+    return ids[:, 0], ids[:, 1]
 
 
 def _benchmark_matching(args) -> None:
@@ -433,7 +469,17 @@ def _benchmark_matching(args) -> None:
     output = Path(args.output)
     if not (output.parent if str(output.parent) else Path(".")).is_dir():
         raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
-    table = benchmark_dataset(dataset, output, args.method, args.k, args.points, args.jobs, args.limit, args.scheduler)
+    table = benchmark_dataset(
+        dataset,
+        output,
+        args.method,
+        args.k,
+        args.points,
+        args.jobs,
+        args.limit,
+        args.scheduler,
+        landmarks=args.landmarks,
+    )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")
 
