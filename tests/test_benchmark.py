@@ -27,7 +27,10 @@ def pose_dataset(tmp_path_factory):
 
 def test_identity_pair_scores_perfectly():
     mesh = shapes.humanoid(spacing=0.05)
-    scored = evaluate_pair(mesh, mesh, np.arange(mesh.n_vertices), k=30, methods=("fmap",), points=200)
+    scored = evaluate_pair(mesh, mesh, np.arange(mesh.n_vertices), k=30, methods=("fmap", "icskm", "sgfe"), points=200)
+    assert {(row["method"], row["basis"]) for row in scored["rows"]} == {
+        (m, b) for m in ("fmap", "icskm", "sgfe") for b in ("lbo", "hamiltonian")
+    }
     for row in scored["rows"]:
         assert row["mean_error"] < 1e-3 and row["within_0.05"] == 1.0, row
     with pytest.raises(HamsaError, match="unknown matching method"):

@@ -10,7 +10,11 @@ symmetries, on a seeded sample of source vertices):
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
 * ``icskm``: iterative closest spectral kernel maps from ``landmarks`` ground-truth pairs drawn at random
   (seeded); its Hamiltonian is the paper's landmark potential, V = geodesic distance from the landmarks
-  (normalized to [0, 1]) on each shape.
+  (normalized to [0, 1]) on each shape;
+* ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
+  (HKS functional map + ICP on 20 eigenpairs); its Hamiltonian is the paper's area-distortion potential
+  (eq. stablePotential, ``AREA_MU`` x V with V >= 1 from the ground-truth map, as in the paper's Fig.
+  bench_area — an oracle potential that shows what a good mask of the stretching regions buys).
 
 :func:`benchmark_dataset` runs every evaluation pair of a :class:`~hamsa.datasets.Dataset` in parallel
 (joblib processes; a Dask cluster through joblib's backend when given a scheduler address) with a
@@ -35,17 +39,26 @@ from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
 from hamsa.io import atomic_write
-from hamsa.matching import functional_map, icp_refine, match_descriptors, match_icskm, resolve_signs, zoomout
+from hamsa.matching import (
+    functional_map,
+    icp_refine,
+    match_descriptors,
+    match_icskm,
+    match_sgfe,
+    resolve_signs,
+    zoomout,
+)
 from hamsa.mesh import TriMesh
 
-METHODS = ("hks", "wks", "fmap", "icskm")
+METHODS = ("hks", "wks", "fmap", "icskm", "sgfe")
+AREA_MU = 100.0
 BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
 
 
-def match_pair(method: str, source, target, landmarks=None) -> np.ndarray:
-    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (and for
-    ``icskm`` the landmark pairs ``(source ids, target ids)``)."""
+def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.ndarray:
+    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (for ``icskm``
+    the landmark pairs ``(source ids, target ids)``; for ``sgfe`` the two meshes)."""
     if method == "hks":
         times = default_hks_times(source, 50)
         return match_descriptors(
@@ -56,14 +69,20 @@ def match_pair(method: str, source, target, landmarks=None) -> np.ndarray:
         return match_descriptors(
             wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
         )
-    if method == "fmap":
+    if method in ("fmap", "sgfe"):
         small = source.truncate(20), target.truncate(20)
         times = default_hks_times(source, 30)
         C = functional_map(
             *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
         )
-        _, initial = icp_refine(C, *small)
-        return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
+        C, initial = icp_refine(C, *small)
+        if method == "fmap":
+            return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
+        if meshes is None:
+            raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
+        start = np.eye(source.k)
+        start[:20, :20] = C
+        return match_sgfe(*meshes, source, target, start)[1]
     if method == "icskm":
         if landmarks is None:
             raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
@@ -117,17 +136,38 @@ def evaluate_pair(
             lambda mesh, V: eigenbasis(mesh, k, V)
         )  # fmt: skip
         landmark_bases = {"lbo": bases["lbo"], "hamiltonian": (solve(source, V_s), solve(target, V_t))}
+    if "sgfe" in methods:
+        V_s, V_t = _area_distortion_potentials(source, target, truth)
+        solve = (lambda mesh, V: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
+            lambda mesh, V: eigenbasis(mesh, k, V)
+        )  # fmt: skip
+        area_bases = {"lbo": bases["lbo"], "hamiltonian": (solve(source, AREA_MU * V_s), solve(target, AREA_MU * V_t))}
     rows, curves = [], {}
     for method in methods:
         for basis in BASES:
             if method == "icskm":
                 mapping = match_pair(method, *landmark_bases[basis], landmarks=pairs)
+            elif method == "sgfe":
+                mapping = match_pair(method, *area_bases[basis], meshes=(source, target))
             else:
                 mapping = match_pair(method, *bases[basis])
             errors = distances.errors(mapping[chosen])
             rows.append({"method": method, "basis": basis, **summary(errors)})
             curves.setdefault(method, {})[basis] = error_curve(errors).tolist()
     return {"rows": rows, "curves": curves}
+
+
+def _area_distortion_potentials(source: TriMesh, target: TriMesh, truth: np.ndarray):
+    """Area distortion (>= 1) of the ground-truth map on each shape; 1 where a vertex has no known image."""
+    V_s = np.ones(source.n_vertices)
+    known = truth >= 0
+    inverse = np.full(target.n_vertices, -1, dtype=np.int64)
+    inverse[truth[known]] = np.flatnonzero(known)
+    V_t = np.ones(target.n_vertices)
+    back = inverse >= 0
+    V_s[known] = potentials.area_distortion(source, target, np.where(known, truth, 0))[known]
+    V_t[back] = potentials.area_distortion(target, source, np.where(back, inverse, 0))[back]
+    return V_s, V_t
 
 
 def dataset_pairs(dataset: Dataset, limit: int | None = None) -> list[tuple[str, str]]:

@@ -168,7 +168,10 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("dataset", help="dataset folder (TOSCA or SCAPE layout, or a folder of meshes)")
     bench.add_argument("--kind", choices=("auto", "tosca", "scape", "folder"), default="auto")
     bench.add_argument(
-        "--method", nargs="+", choices=("hks", "wks", "fmap", "icskm"), default=["hks", "wks", "fmap", "icskm"]
+        "--method",
+        nargs="+",
+        choices=("hks", "wks", "fmap", "icskm", "sgfe"),
+        default=["hks", "wks", "fmap", "icskm", "sgfe"],
     )
     bench.add_argument(
         "--landmarks", type=_positive_int, default=3, help="icskm: ground-truth landmark pairs per pair (default 3)"

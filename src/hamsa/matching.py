@@ -12,10 +12,12 @@ Any basis works: the LBO's or a Hamiltonian's (the paper's point).
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
+from hamsa.mesh import as_trimesh
 
 
 def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int | None = None) -> np.ndarray:
@@ -246,3 +248,82 @@ def match_icskm(
             U, _, Vt = np.linalg.svd(cross)
             C = U @ Vt
     return C, nearest_rows(es @ C, et)
+
+
+def spectral_gradient_fields(mesh, basis: Eigenbasis, count: int = 10) -> np.ndarray:
+    """Pointwise inner products of eigenfunction gradients ``G_ij(x) = <grad psi_i, grad psi_j>(x)``, (n, c, c).
+
+    Shtern & Kimmel 2015 (NOTES §4.3): intrinsic, so for an isometry with functional map C they transform
+    as ``G_t(T x) = C^T G_s(x) C``. Per-face gradients of the P1 functions, averaged to the vertices with
+    the face areas as weights; each gradient is divided by its L2 norm ``sqrt(psi_i^T W psi_i)`` so the
+    entries are dimensionless (the constant, zero-energy mode is left as is: its gradient is zero).
+    """
+    from hamsa.geodesic import face_gradients
+
+    mesh = as_trimesh(mesh)
+    if mesh.n_vertices != basis.n:
+        raise HamsaError(f"the mesh has {mesh.n_vertices} vertices, the basis {basis.n}")
+    count = min(int(count), basis.k)
+    gradients = face_gradients(mesh, basis.vectors[:, :count])  # (m, 3, c)
+    areas = mesh.face_areas
+    energy = np.einsum("m,mdi,mdi->i", areas, gradients, gradients)
+    gradients = gradients / np.sqrt(np.where(energy > 1e-12 * energy.max(), energy, 1.0))
+    per_face = np.einsum("mdi,mdj->mij", gradients, gradients).reshape(len(areas), -1)
+    incidence = sp.csr_matrix(
+        (np.repeat(areas, 3), (mesh.faces.ravel(), np.repeat(np.arange(len(areas)), 3))),
+        shape=(mesh.n_vertices, len(areas)),
+    )
+    weight = np.asarray(incidence.sum(axis=1)).ravel()
+    return (incidence @ per_face / weight[:, None]).reshape(mesh.n_vertices, count, count)
+
+
+def match_sgfe(
+    source_mesh,
+    target_mesh,
+    source: Eigenbasis,
+    target: Eigenbasis,
+    initial_C: np.ndarray,
+    *,
+    count: int = 10,
+    weight: float = 1.0,
+    iterations: int = 20,
+    sample: int = 3000,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Spectral gradient fields embedding (Shtern & Kimmel 2015): ICP on eigenfunction values and gradients.
+
+    Each vertex is embedded by its eigenfunction values and the upper triangle of
+    :func:`spectral_gradient_fields` (off-diagonal entries times sqrt 2, so Euclidean distances are Frobenius
+    distances). The source embedding is carried into the target's coordinates by an orthogonal C,
+    ``(Psi_s C, C_g^T G_s C_g)`` with C_g the leading (count, count) block; ICP alternates nearest
+    neighbours in the concatenated embedding (``weight`` on the gradient part) and the Procrustes C of the
+    value part, from ``initial_C`` (e.g. an HKS functional map after :func:`icp_refine`, padded to k).
+
+    Returns (C (k, k), map_source_to_target (n_s,)).
+    """
+    if source.k != target.k or np.shape(initial_C) != (source.k, target.k):
+        raise HamsaError(f"need bases of the same size and a ({source.k}, {source.k}) initial C")
+    count = min(count, source.k)
+    G_s = spectral_gradient_fields(source_mesh, source, count)
+    G_t = spectral_gradient_fields(target_mesh, target, count)
+    upper = np.triu_indices(count)
+    factor = np.where(upper[0] == upper[1], 1.0, np.sqrt(2.0)) * weight
+
+    def gradient_part(G, C_g=None):
+        G = G if C_g is None else np.einsum("ki,nkl,lj->nij", C_g, G, C_g, optimize=True)
+        return G[:, upper[0], upper[1]] * factor
+
+    target_embedding = np.hstack([target.vectors, gradient_part(G_t)])
+    rows = np.random.default_rng(seed).choice(source.n, min(sample, source.n), replace=False)
+    weights = source.mass.diagonal()[rows]
+    C, mapping = np.asarray(initial_C, dtype=np.float64), None
+    for _ in range(iterations):
+        embedding = np.hstack([source.vectors[rows] @ C, gradient_part(G_s[rows], C[:count, :count])])
+        new = nearest_rows(embedding, target_embedding)
+        if mapping is not None and np.array_equal(new, mapping):
+            break
+        mapping = new
+        U, _, Vt = np.linalg.svd(source.vectors[rows].T @ (weights[:, None] * target.vectors[mapping]))
+        C = U @ Vt
+    embedding = np.hstack([source.vectors @ C, gradient_part(G_s, C[:count, :count])])
+    return C, nearest_rows(embedding, target_embedding)
