@@ -82,3 +82,19 @@ def test_curvature_of_spheres_and_plane():
     corners = np.isin(np.arange(plane.n_vertices), [0, 10, 110, 120])
     assert np.abs(gaussian[~corners]).max() < 1e-9  # corners carry the boundary's turning angle
     assert np.abs(potentials.curvature(plane, "mean")).max() < 1e-9
+
+
+def test_dalmatian_texture_is_seeded_geodesic_spots():
+    mesh = shapes.icosphere(4)
+    colors = potentials.dalmatian_texture(mesh, spots=12, radius=0.05, seed=3)
+    assert colors.shape == (mesh.n_vertices, 3) and colors.min() >= 0 and colors.max() <= 1
+    np.testing.assert_array_equal(colors, potentials.dalmatian_texture(mesh, spots=12, radius=0.05, seed=3))
+    assert not np.array_equal(colors, potentials.dalmatian_texture(mesh, spots=12, radius=0.05, seed=4))
+    dark = colors[:, 0] < 0.5
+    # 12 discs of geodesic radius ~0.05 sqrt(4 pi) = 0.18 (x 0.7 up to the soft edge) on the unit sphere:
+    # each covers ~pi r^2 ~ 0.05 of the 4 pi area, overlaps aside
+    assert 0.02 < dark.mean() < 0.3
+    luminance = potentials.from_vertex_colors(mesh, colors)
+    np.testing.assert_allclose(luminance, colors[:, 0])  # grey: luminance = any channel
+    with pytest.raises(PotentialError):
+        potentials.dalmatian_texture(mesh, spots=0)

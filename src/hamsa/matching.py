@@ -200,7 +200,7 @@ def match_icskm(
     ----------
     source, target : eigenbases with the same k
     source_landmarks, target_landmarks : (L,) vertex ids, L >= 1, matched in order
-    scales : heat scales, geometric in [4 ln10 / E_k, 4 ln10 / E_low]
+    scales : heat scales, geometric in [4 ln10 / E_k, 4 ln10 / E_6]
     iterations : ICP iterations per scale at most (stops when the sampled map no longer changes)
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
 
@@ -218,7 +218,11 @@ def match_icskm(
         raise HamsaError(f"need matched, non-empty landmark lists, got {p.shape} and {q.shape}")
     if p.min() < 0 or p.max() >= source.n or q.min() < 0 or q.max() >= target.n:
         raise HamsaError("a landmark is not a vertex id of its shape")
-    times = default_hks_times(source, scales)[::-1]  # coarse to fine
+    # coarse to fine: from the scale where about the first five eigenfunctions count (not the ground
+    # state's: a Hamiltonian's E_1 can be near 0 and a scale set by it keeps psi_1 alone, collapsing the map)
+    # to the one where all k do
+    spectrum = np.abs(source.values)
+    times = np.geomspace(4 * np.log(10) / spectrum[-1], 4 * np.log(10) / spectrum[min(5, source.k - 1)], scales)[::-1]
     # initial C on a small basis from landmark heat kernels and the HKS (intrinsic: no sign ambiguity)
     small = min(20, source.k)
     s0, t0 = source.truncate(small), target.truncate(small)
