@@ -4,6 +4,7 @@ import pytest
 import hamsa
 from hamsa import HamsaError, shapes
 from hamsa.diffusion import default_hks_times, heat_kernel_signature, wave_kernel_signature
+from hamsa.eigen import Eigenbasis
 from hamsa.evaluation import geodesic_errors, summary
 from hamsa.matching import (
     functional_from_map,
@@ -304,3 +305,16 @@ def test_cli_match_refuses_bad_landmarks(tmp_path, pair, capsys):
         assert main(base + extra) == 2
         assert message in capsys.readouterr().err
     assert not (tmp_path / "m.npy").exists()
+
+
+def test_signs_without_truth_agree_with_the_true_signs_on_an_isometry(pair):
+    from hamsa.matching import resolve_signs, resolve_signs_without_truth
+
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 20), hamsa.eigenbasis(rolled, 20)
+    flipped = Eigenbasis(target.values, target.vectors * np.array([1, -1, 1, -1, -1] + [1] * 15), target.mass)
+    truth = resolve_signs(source, flipped, np.arange(flat.n_vertices), (1, 2, 3, 4))
+    assert truth.tolist() == [-1, 1, -1, -1]
+    np.testing.assert_array_equal(resolve_signs_without_truth(source, flipped, (1, 2, 3, 4)), truth)
+    with pytest.raises(HamsaError, match="below size"):
+        resolve_signs_without_truth(source, flipped, (25,))

@@ -46,12 +46,14 @@ from hamsa.matching import (
     match_icskm,
     match_sgfe,
     resolve_signs,
+    resolve_signs_without_truth,
     zoomout,
 )
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "sgfe")
 AREA_MU = 100.0
+SIGNS = ("truth", "descriptors")
 BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
 
@@ -90,19 +92,34 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
     raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
 
 
-def paired_bases(source: TriMesh, target: TriMesh, ground_truth, k: int, cache_dir=None) -> dict:
-    """{"lbo": (source basis, target basis), "hamiltonian": (...)} with the paper's matching potential.
+def paired_bases(
+    source: TriMesh, target: TriMesh, ground_truth, k: int, cache_dir=None, mu: float = 1.0, signs: str = "truth"
+) -> dict:
+    """{"lbo": (source basis, target basis), "hamiltonian": (...)} with the paper's matching potential
+    ``mu x`` (normalized sum of phi_2..phi_5, scaled to [0, 1]).
 
-    ``ground_truth`` (n_source,) target ids (-1 where unknown) resolves the eigenfunction signs.
+    ``signs``: "truth" resolves the eigenfunction signs with ``ground_truth`` (n_source,) target ids (-1
+    where unknown), as the paper assumes; "descriptors" without it
+    (:func:`hamsa.matching.resolve_signs_without_truth`).
     """
+    if signs not in SIGNS:
+        raise HamsaError(f"signs must be one of {SIGNS}, got {signs!r}")
+    if not (np.isfinite(mu) and mu > 0):
+        raise HamsaError(f"mu must be a positive number, got {mu}")
     solve = (lambda mesh, V=None: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
         lambda mesh, V=None: eigenbasis(mesh, k, V)
     )  # fmt: skip
     lbo = solve(source), solve(target)
-    signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4))
+    if signs == "truth":
+        target_signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4))
+    else:
+        target_signs = resolve_signs_without_truth(*lbo, (1, 2, 3, 4))
     V_s = potentials.eigenfunction_sum(lbo[0])
-    V_t = potentials.eigenfunction_sum(lbo[1], signs=signs)
-    return {"lbo": lbo, "hamiltonian": (solve(source, V_s / V_s.max()), solve(target, V_t / V_t.max()))}
+    V_t = potentials.eigenfunction_sum(lbo[1], signs=target_signs)
+    return {
+        "lbo": lbo,
+        "hamiltonian": (solve(source, mu * V_s / V_s.max()), solve(target, mu * V_t / V_t.max())),
+    }
 
 
 def evaluate_pair(
@@ -115,18 +132,21 @@ def evaluate_pair(
     seed: int = 0,
     cache_dir=None,
     landmarks: int = 3,
+    mu: float = 1.0,
+    signs: str = "truth",
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
     ``landmarks``: ground-truth pairs given to ``icskm`` (drawn with ``seed`` among the vertices that have
-    a true image; the same for both bases)."""
+    a true image; the same for both bases). ``mu``, ``signs``: the matching potential's scale and how the
+    eigenfunction signs are resolved (see :func:`paired_bases`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
     candidates = np.flatnonzero(truth >= 0)
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
-    bases = paired_bases(source, target, truth, k, cache_dir)
+    bases = paired_bases(source, target, truth, k, cache_dir, mu, signs)
     pairs = None
     if "icskm" in methods:
         p = np.random.default_rng(seed + 1).choice(candidates, landmarks, replace=False)
@@ -206,6 +226,8 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         settings["points"],
         cache_dir=settings["cache"],
         landmarks=settings.get("landmarks", 3),
+        mu=settings.get("mu", 1.0),
+        signs=settings.get("signs", "truth"),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     with atomic_write(path, "w") as handle:
@@ -241,6 +263,8 @@ def benchmark_dataset(
     scheduler: str | None = None,
     progress: bool = True,
     landmarks: int = 3,
+    mu: float = 1.0,
+    signs: str = "truth",
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -254,6 +278,7 @@ def benchmark_dataset(
         to run the pairs on a cluster instead (needs ``dask.distributed``)
     limit : at most this many pairs per class
     landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
+    mu, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -263,6 +288,8 @@ def benchmark_dataset(
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
     if "icskm" in methods:
         settings["landmarks"] = int(landmarks)
+    if mu != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
+        settings.update(mu=float(mu), signs=signs)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):

@@ -176,6 +176,19 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--landmarks", type=_positive_int, default=3, help="icskm: ground-truth landmark pairs per pair (default 3)"
     )
+    bench.add_argument(
+        "--mu",
+        type=float,
+        default=1.0,
+        help="hks/wks/fmap: scale of the matching potential (normalized sum of phi_2..phi_5 in [0, 1]; default 1)",
+    )
+    bench.add_argument(
+        "--signs",
+        choices=("truth", "descriptors"),
+        default="truth",
+        help="how that potential's eigenfunction signs are made consistent: with the ground truth (the paper's "
+        "assumption, default) or from HKS functional maps alone",
+    )
     bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
     bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
     bench.add_argument("--jobs", type=_positive_int, default=1, help="parallel worker processes (default 1)")
@@ -482,6 +495,8 @@ def _benchmark_matching(args) -> None:
         args.limit,
         args.scheduler,
         landmarks=args.landmarks,
+        mu=args.mu,
+        signs=args.signs,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")

@@ -131,6 +131,30 @@ def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, 
     return np.where(products >= 0, 1.0, -1.0)
 
 
+def resolve_signs_without_truth(source: Eigenbasis, target: Eigenbasis, indices, size: int = 20) -> np.ndarray:
+    """Signs s_j for the target eigenfunctions j in ``indices`` from the shapes alone (no ground truth).
+
+    An HKS-fitted functional map on the first ``size`` eigenpairs, refined by ICP (:func:`icp_refine`),
+    estimates ``C_jj = <phi_j^source, phi_j^target o map>_A``; ``s_j = sign(C_jj)``. The HKS cannot tell a
+    shape from its mirror image, so on a left-right symmetric shape the signs of antisymmetric
+    eigenfunctions can come out as the mirror map's: the potential is then consistent with the mirrored
+    correspondence (compare with :func:`resolve_signs`, which uses the true map).
+    """
+    from hamsa.diffusion import default_hks_times, heat_kernel_signature
+
+    indices = np.asarray(indices)
+    size = min(size, source.k, target.k)
+    if indices.max() >= size:
+        raise HamsaError(f"indices must be below size = {size}")
+    small = source.truncate(size), target.truncate(size)
+    times = default_hks_times(small[0], 30)
+    C = functional_map(
+        *small, heat_kernel_signature(small[0], times, scaled=True), heat_kernel_signature(small[1], times, scaled=True)
+    )
+    C, _ = icp_refine(C, *small)
+    return np.where(C[indices, indices] >= 0, 1.0, -1.0)
+
+
 def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=None) -> tuple[np.ndarray, np.ndarray]:
     """Spectral upsampling (ZoomOut, Melzi et al. 2019): refine a point map by alternating
     ``C_k = Psi_s[:, :k]^T A_s Pi Psi_t[:, :k]`` and the nearest-neighbour map of C_k, for growing k.
