@@ -102,7 +102,9 @@ def test_fig9_compressed_modes_runs(run_experiment):
     numbers = run_experiment("fig9_cmm")
     assert all(row["orthogonality_error"] < 1e-6 for row in numbers["rows"])
     for ratio in numbers["ratios"].values():
-        assert 0.8 < ratio["objective_hamiltonian_over_admm"] < 1.2  # same objective, similar optima
+        assert 0.8 < ratio["objective_hamiltonian_over_admm"] <= 1.05  # same objective; issue 5's 5% bar
+    agreement = numbers["discretization"]["agreement"]  # measured: 0.90 (IRLS, area L1) vs 0.56 (ADMM, vector)
+    assert agreement["hamiltonian/area"] > agreement["admm/vector"] + 0.1
 
 
 def test_fig10_hamiltonian_hks_beats_the_lbo_hks_on_the_builtin_poses(run_experiment):
@@ -137,7 +139,7 @@ def test_theorem_checks(run_experiment):
 def test_report_has_every_claim_measured_and_at_least_ten_figures(report):
     folder, results = report
     claims = json.loads((folder / "results.json").read_text())["claims"]
-    assert [c["id"] for c in claims][:3] == ["T1", "T2", "T3"] and len(claims) == 18
+    assert [c["id"] for c in claims][:3] == ["T1", "T2", "T3"] and len(claims) == 21
     for claim in claims:
         assert claim["verdict"] in ("reproduced", "not reproduced", "not applicable"), claim
         assert claim["measured"] and any(ch.isdigit() for ch in claim["measured"]), claim

@@ -48,3 +48,17 @@ def test_basis_stability_is_one_without_noise_and_drops_with_it(mesh):
     holed, kept = topological_noise(mesh, 0.3, seed=0)
     holey = hamsa.eigenbasis(holed, 10)
     assert basis_stability(clean, holey, kept).shape == (10,)
+
+
+def test_refine_region_keeps_the_surface_and_is_conforming():
+    from hamsa.noise import refine_region
+
+    mesh = shapes.capsule(0.5, 3.0, 24)
+    refined = refine_region(mesh, mesh.vertices[mesh.faces].mean(axis=1)[:, 0] > 0)
+    assert refined.n_vertices > 2 * mesh.n_vertices
+    np.testing.assert_array_equal(refined.vertices[: mesh.n_vertices], mesh.vertices)  # ids kept
+    assert np.isclose(refined.area, mesh.area, rtol=1e-12)  # midpoints lie on the faces
+    assert refined.n_components == 1 and len(refined.boundary_loops) == 0  # closed: no hanging vertices
+    assert refined.euler_characteristic == mesh.euler_characteristic
+    # the same surface: the low spectrum moves only by the discretization error
+    np.testing.assert_allclose(hamsa.eigenbasis(refined, 6).values[1:], hamsa.eigenbasis(mesh, 6).values[1:], rtol=0.01)

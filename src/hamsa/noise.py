@@ -96,6 +96,51 @@ def topological_noise(
     return holed, kept
 
 
+def refine_region(mesh, faces) -> TriMesh:
+    """The same surface with a denser triangulation on some faces: a remeshing for discretization tests.
+
+    The chosen faces are split 1-to-4 at their edge midpoints ("red"); a face with two split edges is
+    split 1-to-4 too (repeated until none is left), and a face with one split edge is bisected ("green"),
+    so the result is conforming — no hanging vertices. Midpoints lie on the flat faces: the piecewise-linear
+    surface is unchanged, only its sampling. The original vertices keep their indices (0..n-1); the
+    midpoints follow.
+
+    Parameters
+    ----------
+    mesh : TriMesh or (vertices, faces)
+    faces : (m,) bool mask or face indices to refine
+    """
+    mesh = as_trimesh(mesh)
+    F = mesh.faces
+    red = np.zeros(len(F), dtype=bool)
+    red[np.asarray(faces)] = True
+    corner_edges = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2), axis=2)  # edge c: v_c -> v_{c+1}
+    unique, edge_ids = np.unique(corner_edges.reshape(-1, 2), axis=0, return_inverse=True)
+    edge_ids = edge_ids.reshape(-1, 3)
+    while True:
+        split = np.zeros(len(unique), dtype=bool)
+        split[edge_ids[red]] = True
+        promote = ~red & (split[edge_ids].sum(axis=1) >= 2)
+        if not promote.any():
+            break
+        red |= promote
+    new_id = np.full(len(unique), -1, dtype=np.int64)
+    new_id[split] = mesh.n_vertices + np.arange(split.sum())
+    vertices = np.vstack([mesh.vertices, mesh.vertices[unique[split]].mean(axis=1)])
+    m = new_id[edge_ids]  # (faces, 3) midpoint of edge c, or -1
+    v0, v1, v2 = F.T
+    out = [F[~red & (m < 0).all(axis=1)]]
+    r = red
+    out += [np.stack(t, axis=1) for t in (
+        (v0[r], m[r, 0], m[r, 2]), (v1[r], m[r, 1], m[r, 0]), (v2[r], m[r, 2], m[r, 1]), (m[r, 0], m[r, 1], m[r, 2])
+    )]  # fmt: skip
+    for c in range(3):  # green: only edge c split
+        g = ~red & (m[:, c] >= 0)
+        a, b, opposite = F[g, c], F[g, (c + 1) % 3], F[g, (c + 2) % 3]
+        out += [np.stack([a, m[g, c], opposite], axis=1), np.stack([m[g, c], b, opposite], axis=1)]
+    return TriMesh(vertices, np.vstack(out))
+
+
 def basis_stability(
     clean: Eigenbasis, perturbed: Eigenbasis, kept=None, count: int | None = None, cluster_rtol: float = 0.03
 ) -> np.ndarray:
