@@ -9,8 +9,9 @@ symmetries, on a seeded sample of source vertices):
 * ``hks`` / ``wks``: nearest neighbours of the heat / wave kernel signatures;
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
 * ``icskm``: iterative closest spectral kernel maps from ``landmarks`` ground-truth pairs drawn at random
-  (seeded); its Hamiltonian is the paper's landmark potential, V = geodesic distance from the landmarks
-  (normalized to [0, 1]) on each shape;
+  (seeded), with the geodesic distances from each landmark as extra coordinates of the embedding (both
+  bases); its Hamiltonian is the paper's landmark potential, V = geodesic distance from the nearest
+  landmark (normalized to [0, 1]) on each shape;
 * ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
   (HKS functional map + ICP on 20 eigenpairs); its Hamiltonian is the paper's area-distortion potential
   (eq. stablePotential, ``AREA_MU`` x V with V >= 1 from the ground-truth map, as in the paper's Fig.
@@ -38,6 +39,7 @@ from hamsa.diffusion import default_hks_times, default_wks_energies, heat_kernel
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
+from hamsa.geodesic import GeodesicSolver
 from hamsa.io import atomic_write
 from hamsa.matching import (
     functional_map,
@@ -60,7 +62,8 @@ SCORES = ("auc", "mean_error", "within_0.05")
 
 def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.ndarray:
     """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (for ``icskm``
-    the landmark pairs ``(source ids, target ids)``; for ``sgfe`` the two meshes)."""
+    the landmark pairs ``(source ids, target ids)``, and with ``meshes`` the distances from them as
+    features; for ``sgfe`` the two meshes)."""
     if method == "hks":
         times = default_hks_times(source, 50)
         return match_descriptors(
@@ -88,7 +91,10 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
     if method == "icskm":
         if landmarks is None:
             raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
-        return match_icskm(source, target, *landmarks)[1]
+        features = None
+        if meshes is not None:
+            features = tuple(GeodesicSolver(mesh).distances_from(ids) for mesh, ids in zip(meshes, landmarks))
+        return match_icskm(source, target, *landmarks, features=features)[1]
     raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
 
 
@@ -166,7 +172,7 @@ def evaluate_pair(
     for method in methods:
         for basis in BASES:
             if method == "icskm":
-                mapping = match_pair(method, *landmark_bases[basis], landmarks=pairs)
+                mapping = match_pair(method, *landmark_bases[basis], landmarks=pairs, meshes=(source, target))
             elif method == "sgfe":
                 mapping = match_pair(method, *area_bases[basis], meshes=(source, target))
             else:

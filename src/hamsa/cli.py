@@ -441,7 +441,7 @@ def _match(args) -> None:
         source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
     else:
         source, target = (eigenbasis(mesh, k) for mesh in meshes)
-    mapping = match_pair(args.method, source, target, landmarks)
+    mapping = match_pair(args.method, source, target, landmarks, meshes=meshes)
     with atomic_write(output) as handle:
         np.save(handle, mapping)
     print(

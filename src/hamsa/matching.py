@@ -207,6 +207,7 @@ def match_icskm(
     landmark_weight: float = 10.0,
     sample: int = 3000,
     seed: int = 0,
+    features: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
@@ -227,6 +228,10 @@ def match_icskm(
     scales : heat scales, geometric in [4 ln10 / E_k, 4 ln10 / E_6]
     iterations : ICP iterations per scale at most (stops when the sampled map no longer changes)
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
+    features : optional ((n_s, f), (n_t, f)) intrinsic functions that correspond on the two shapes (e.g. the
+        geodesic distances from each landmark, :meth:`hamsa.geodesic.GeodesicSolver.distances_from`),
+        appended to the embedding in every nearest-neighbour step, scaled to the embedding's size: they
+        keep the map from swapping parts that the kernels alone cannot tell apart (left and right limbs)
 
     Returns
     -------
@@ -264,18 +269,30 @@ def match_icskm(
     weights = source.mass.diagonal()[rows]
     landmark_mass = landmark_weight * weights.mean()
     mapping = None
+    if features is not None:
+        fs, ft = (np.asarray(f, dtype=np.float64).reshape(len(f), -1) for f in features)
+        if fs.shape[0] != source.n or ft.shape != (target.n, fs.shape[1]):
+            raise HamsaError(f"features must be (n_s, f) and (n_t, f), got {fs.shape} and {ft.shape}")
+        scale = np.sqrt(np.mean(np.vstack([fs, ft]) ** 2))
+        fs, ft = fs / scale, ft / scale
+
+    def extend(points, extra, t_scale):  # the features weigh like the embedding at this scale
+        return points if features is None else np.hstack([points, extra * t_scale])
+
     for t in times:
         es = source.vectors * np.exp(-source.values * t / 2)
         et = target.vectors * np.exp(-target.values * t / 2)
+        size = np.sqrt(np.mean(np.sum(et**2, axis=1)))
+        target_points = extend(et, ft if features is not None else None, size)
         for _ in range(iterations):
-            new = nearest_rows(es[rows] @ C, et)
+            new = nearest_rows(extend(es[rows] @ C, fs[rows] if features is not None else None, size), target_points)
             if mapping is not None and np.array_equal(new, mapping):
                 break
             mapping = new
             cross = es[rows].T @ (weights[:, None] * et[mapping]) + landmark_mass * es[p].T @ et[q]
             U, _, Vt = np.linalg.svd(cross)
             C = U @ Vt
-    return C, nearest_rows(es @ C, et)
+    return C, nearest_rows(extend(es @ C, fs if features is not None else None, size), target_points)
 
 
 def spectral_gradient_fields(mesh, basis: Eigenbasis, count: int = 10) -> np.ndarray:
