@@ -208,6 +208,7 @@ def match_icskm(
     sample: int = 3000,
     seed: int = 0,
     features: tuple[np.ndarray, np.ndarray] | None = None,
+    feature_weight: float = 0.2,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
@@ -230,8 +231,9 @@ def match_icskm(
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
     features : optional ((n_s, f), (n_t, f)) intrinsic functions that correspond on the two shapes (e.g. the
         geodesic distances from each landmark, :meth:`hamsa.geodesic.GeodesicSolver.distances_from`),
-        appended to the embedding in every nearest-neighbour step, scaled to the embedding's size: they
-        keep the map from swapping parts that the kernels alone cannot tell apart (left and right limbs)
+        appended to the embedding in every nearest-neighbour step, scaled to ``feature_weight`` times the
+        embedding's size: they keep the map from swapping parts that the kernels alone cannot tell apart
+        (left and right limbs); kept small, the spectral embedding still decides the fine alignment
 
     Returns
     -------
@@ -282,7 +284,7 @@ def match_icskm(
     for t in times:
         es = source.vectors * np.exp(-source.values * t / 2)
         et = target.vectors * np.exp(-target.values * t / 2)
-        size = np.sqrt(np.mean(np.sum(et**2, axis=1)))
+        size = feature_weight * np.sqrt(np.mean(np.sum(et**2, axis=1)))
         target_points = extend(et, ft if features is not None else None, size)
         for _ in range(iterations):
             new = nearest_rows(extend(es[rows] @ C, fs[rows] if features is not None else None, size), target_points)
