@@ -7,7 +7,11 @@ phi_2..phi_5 in [0, 1] (mu = 1; the eigenfunction signs resolved by the ground t
 assumes) — three matchers:
   hks  : nearest neighbours of the heat kernel signature (50 scales);
   wks  : nearest neighbours of the wave kernel signature (50 energies);
-  fmap : an HKS-fitted 20x20 functional map + ICP, upsampled by ZoomOut to k.
+  fmap : an HKS-fitted 20x20 functional map + ICP, upsampled by ZoomOut to k;
+  icskm: iterative closest spectral kernel maps from three ground-truth landmarks (its Hamiltonian:
+         V = geodesic distance from the landmarks);
+  sgfe : the spectral gradient fields embedding from the fmap start (its Hamiltonian: the area-distortion
+         potential of the ground-truth map, mu = 100).
 Errors are geodesic distances on the target / sqrt(area), at 1000 sampled vertices, symmetries not
 allowed; curves are on [0, 0.25]. Separately, the ground-truth functional map |C| (30x30) in the LBO
 bases and in Hamiltonian bases with the area-distortion potential (eq. stablePotential) and its
