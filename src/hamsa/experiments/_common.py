@@ -82,3 +82,17 @@ def save_figure(figure, path: Path, dpi: int = 110) -> None:
     """Save a matplotlib figure as PNG atomically (a killed run never leaves half an image)."""
     with atomic_write(path, "wb") as handle:
         figure.savefig(handle, format="png", dpi=dpi)
+
+
+def kim_curve_panel(ax, curves: dict, aucs: dict, title: str, labels: dict | None = None) -> None:
+    """One panel of Kim et al. curves: ``curves[basis]`` a list of per-pair curves on THRESHOLDS (averaged),
+    LBO dashed and Hamiltonian solid, each labelled with its mean AUC ``aucs[basis]``."""
+    from hamsa.evaluation import THRESHOLDS
+
+    for basis, style in (("lbo", "--"), ("hamiltonian", "-")):
+        label = (labels or {}).get(basis, basis)
+        ax.plot(THRESHOLDS, np.mean(curves[basis], axis=0), style, label=f"{label} (AUC {aucs[basis]:.3f})")
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel("geodesic error / sqrt(area)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)

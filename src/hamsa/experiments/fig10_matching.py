@@ -32,10 +32,9 @@ import numpy as np
 import hamsa
 from hamsa import potentials, shapes
 from hamsa.benchmark import BASES, METHODS, SCORES, evaluate_pair, summarize
-from hamsa.evaluation import THRESHOLDS
 from hamsa.matching import functional_from_map, offdiagonal_energy
 
-from ._common import Timer, data_file, parse_args, save_figure, unit_area, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, unit_area, write_json
 
 
 def _pairs(args):
@@ -104,13 +103,8 @@ def run(args) -> dict:
 def _plot_curves(path, curves, mean, dataset):
     figure, axes = plt.subplots(1, len(METHODS), figsize=(4.2 * len(METHODS), 3.6), sharey=True)
     for ax, method in zip(axes, METHODS):
-        for basis, style in zip(BASES, ("--", "-")):
-            curve = np.mean(curves[method][basis], axis=0)
-            ax.plot(THRESHOLDS, curve, style, label=f"{basis} (AUC {mean[method][basis]['auc']:.3f})")
-        ax.set_title(f"{method} — {dataset}", fontsize=10)
-        ax.set_xlabel("geodesic error / sqrt(area)")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="lower right", fontsize=8)
+        aucs = {basis: mean[method][basis]["auc"] for basis in BASES}
+        kim_curve_panel(ax, curves[method], aucs, f"{method} — {dataset}")
     axes[0].set_ylabel("% correspondences")
     figure.tight_layout()
     save_figure(figure, path)

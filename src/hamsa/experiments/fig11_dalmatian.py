@@ -24,9 +24,9 @@ import hamsa
 from hamsa import potentials, shapes, viz
 from hamsa.benchmark import _identity_truth, match_pair
 from hamsa.datasets import load_tosca
-from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
+from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 
-from ._common import Timer, data_file, parse_args, save_figure, unit_area, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, unit_area, write_json
 
 MU = 100.0
 METHODS = ("hks", "wks")
@@ -106,7 +106,7 @@ def _plot(path, source, luminance, curves, mean, dataset):
     with tempfile.TemporaryDirectory() as folder:
         try:
             image = viz.render_fields(
-                source, [luminance], Path(folder) / "coat.png", cmap="gray", panel_size=(360, 320)
+                source, [luminance], Path(folder) / "coat.png", titles=["luminance"], cmap="gray", panel_size=(360, 320)
             )
             axes[0].imshow(image)
         except hamsa.MissingDependencyError:  # no [viz] renderer: say so in the panel
@@ -114,14 +114,9 @@ def _plot(path, source, luminance, curves, mean, dataset):
     axes[0].set_axis_off()
     axes[0].set_title(f"synthetic dalmatian coat, V = {MU:g} x luminance", fontsize=10)
     for ax, method in zip(axes[1:], METHODS):
-        for basis, style in (("lbo", "--"), ("hamiltonian", "-")):
-            label = "LBO" if basis == "lbo" else "texture Hamiltonian"
-            ax.plot(THRESHOLDS, np.mean(curves[method][basis], axis=0), style,
-                    label=f"{label} (AUC {mean[method][basis]['auc']:.3f})")  # fmt: skip
-        ax.set_title(f"{method} — {dataset}", fontsize=10)
-        ax.set_xlabel("geodesic error / sqrt(area)")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="lower right", fontsize=8)
+        aucs = {basis: mean[method][basis]["auc"] for basis in ("lbo", "hamiltonian")}
+        labels = {"lbo": "LBO", "hamiltonian": "texture Hamiltonian"}
+        kim_curve_panel(ax, curves[method], aucs, f"{method} — {dataset}", labels)
     axes[1].set_ylabel("% correspondences")
     figure.tight_layout()
     save_figure(figure, path)
