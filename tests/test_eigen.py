@@ -260,9 +260,8 @@ def _has_cuda():
         return False
 
 
+@pytest.mark.skipif(_has_cuda(), reason="CuPy and a GPU are present: the missing-dependency error cannot occur")
 def test_gpu_without_cupy_says_which_extra_to_install(small_mesh):
-    if _has_cuda():
-        pytest.skip("CuPy and a GPU are present here")
     with pytest.raises(hamsa.MissingDependencyError, match="gpu-cuda"):
         hamsa.eigenbasis(small_mesh, 5, device="cuda")
 
@@ -280,3 +279,18 @@ def test_gpu_solver_matches_the_cpu_solver(sphere_5k, potential):
     # same subspace (the sphere has multiplicities: compare spans, not vectors)
     inner = gpu.vectors[:, :35].T @ (gpu.mass @ cpu.vectors)
     assert np.linalg.svd(inner, compute_uv=False).min() > 1 - 1e-6
+
+
+def test_solver_object_factors_once_per_solve(sphere_5k, monkeypatch):
+    from hamsa.eigen import HamiltonianEigensolver
+    from hamsa.factorization import CholeskySolver
+
+    calls = []
+    original = CholeskySolver.refactor
+    monkeypatch.setattr(CholeskySolver, "refactor", lambda self, m: (calls.append(1), original(self, m))[1])
+    solver = HamiltonianEigensolver.for_mesh(sphere_5k, 8, method="krylov")
+    solver.solve(np.ones(sphere_5k.n_vertices))
+    solver.solve(2 * np.ones(sphere_5k.n_vertices))
+    assert len(calls) == 2
+    with pytest.raises(SolverError, match="nothing is factored"):
+        CholeskySolver.unfactored((3, 3)).solve(np.ones(3))

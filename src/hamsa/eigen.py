@@ -660,9 +660,8 @@ class HamiltonianEigensolver:
                 if (n <= _DENSE_MAX_N or 3 * self.k >= n)
                 else "krylov"
             )
-        if method == "krylov" and self.factor is None:
-            shift = float(V.min()) - (self.spectral_scale or 1.0)
-            self.factor = CholeskySolver((H - shift * self.mass).tocsc(), self.backend)
+        if method == "krylov" and self.factor is None:  # factored (once per solve) inside generalized_eigsh
+            self.factor = CholeskySolver.unfactored(H.shape, self.backend)
         previous = self.basis
         values, vectors, info = generalized_eigsh(
             H,

@@ -94,6 +94,17 @@ class CholeskySolver:
         self._factor = None
         self.refactor(matrix)
 
+    @classmethod
+    def unfactored(cls, shape: tuple[int, int], backend: str = "auto") -> CholeskySolver:
+        """A solver with nothing factored yet: its first :meth:`refactor` does the (symbolic and numeric)
+        work, so a caller that owns the solver does not factor a matrix it will replace at once."""
+        solver = cls.__new__(cls)
+        solver.backend = resolve_backend(backend)
+        solver.shape = tuple(shape)
+        solver._symbolic = None
+        solver._factor = None
+        return solver
+
     def refactor(self, matrix: sp.spmatrix) -> None:
         """Factor a new matrix with the same sparsity pattern (CHOLMOD keeps its symbolic analysis)."""
         matrix = sp.csc_matrix(matrix)
@@ -119,6 +130,8 @@ class CholeskySolver:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve ``matrix @ x = rhs`` for ``rhs`` of shape (n,) or (n, p)."""
+        if self._factor is None:
+            raise SolverError("nothing is factored yet: call refactor(matrix) first")
         rhs = np.asarray(rhs, dtype=np.float64)
         if self.backend == "cholmod":
             rhs = np.asfortranarray(rhs)
