@@ -62,3 +62,17 @@ def test_cli_benchmark_matching(pose_dataset, tmp_path, capsys):
     assert code == 0 and "| hks | hamiltonian |" in capsys.readouterr().out
     assert json.loads((out / "table.json").read_text())["pairs"] == 1
     assert main(["benchmark-matching", str(tmp_path / "nowhere"), "-o", str(out)]) == 2
+
+
+def test_texture_and_landmark_feature_methods_on_a_pose_pair(pose_dataset):
+    dataset = load_folder(pose_dataset)
+    (source, _), (target, _) = dataset.load("humanoid0"), dataset.load("humanoid1")
+    identity = np.arange(source.n_vertices)
+    scored = evaluate_pair(source, target, identity, k=40, methods=("hks", "texture", "icskm_geo"), points=300)
+    by = {(r["method"], r["basis"]): r for r in scored["rows"]}
+    assert by[("texture", "lbo")]["auc"] == by[("hks", "lbo")]["auc"]  # the same matcher on the same LBO bases
+    assert by[("texture", "hamiltonian")]["auc"] > by[("texture", "lbo")]["auc"] + 0.05  # the coat tells parts apart
+    for basis in ("lbo", "hamiltonian"):
+        assert by[("icskm_geo", basis)]["within_0.05"] > 0.9
+    with pytest.raises(HamsaError, match="icskm_geo needs the two meshes"):
+        match_pair("icskm_geo", None, None, landmarks=([0], [0]))

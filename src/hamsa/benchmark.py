@@ -8,14 +8,19 @@ symmetries, on a seeded sample of source vertices):
 
 * ``hks`` / ``wks``: nearest neighbours of the heat / wave kernel signatures;
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
-* ``icskm``: iterative closest spectral kernel maps from ``landmarks`` ground-truth pairs drawn at random
-  (seeded), with the geodesic distances from each landmark as extra coordinates of the embedding (both
-  bases); its Hamiltonian is the paper's landmark potential, V = geodesic distance from the nearest
-  landmark (normalized to [0, 1]) on each shape;
+* ``icskm``: iterative closest spectral kernel maps (Shtern & Kimmel 2014) from ``landmarks`` ground-truth
+  pairs drawn at random (seeded), as in the paper; its Hamiltonian is the paper's landmark potential,
+  V = geodesic distance from the nearest landmark (normalized to [0, 1]) on each shape;
+* ``icskm_geo``: the same with the geodesic distances from each landmark as extra coordinates of the
+  embedding (both bases) — hamsa's best pipeline on SCAPE, not one of the paper's;
 * ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
   (HKS functional map + ICP on 20 eigenpairs); its Hamiltonian is the paper's area-distortion potential
   (eq. stablePotential, ``AREA_MU`` x V with V >= 1 from the ground-truth map, as in the paper's Fig.
   bench_area — an oracle potential that shows what a good mask of the stretching regions buys).
+* ``texture``: HKS nearest neighbours with the paper's texture potential, V = ``TEXTURE_MU`` x luminance
+  of a synthetic dalmatian coat (:func:`hamsa.potentials.dalmatian_texture`, seeded) painted on the
+  source and carried to the target by the ground truth (the datasets have no photometry; the paper
+  shows it on the TOSCA dogs).
 
 :func:`benchmark_dataset` runs every evaluation pair of a :class:`~hamsa.datasets.Dataset` in parallel
 (joblib processes; a Dask cluster through joblib's backend when given a scheduler address) with a
@@ -53,8 +58,11 @@ from hamsa.matching import (
 )
 from hamsa.mesh import TriMesh
 
-METHODS = ("hks", "wks", "fmap", "icskm", "sgfe")
+METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
 AREA_MU = 100.0
+TEXTURE_MU = 100.0
+# the Hamiltonian of these methods has its own potential (the others: the paper's eigenfunction sum)
+_POTENTIAL_OF = {"icskm": "landmarks", "icskm_geo": "landmarks", "sgfe": "area", "texture": "texture"}
 SIGNS = ("truth", "descriptors")
 BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
@@ -62,9 +70,9 @@ SCORES = ("auc", "mean_error", "within_0.05")
 
 def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.ndarray:
     """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (for ``icskm``
-    the landmark pairs ``(source ids, target ids)``, and with ``meshes`` the distances from them as
-    features; for ``sgfe`` the two meshes)."""
-    if method == "hks":
+    and ``icskm_geo`` the landmark pairs ``(source ids, target ids)``; for ``icskm_geo`` and ``sgfe`` the
+    two meshes)."""
+    if method in ("hks", "texture"):
         times = default_hks_times(source, 50)
         return match_descriptors(
             heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
@@ -88,11 +96,13 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
         start = np.eye(source.k)
         start[:20, :20] = C
         return match_sgfe(*meshes, source, target, start)[1]
-    if method == "icskm":
+    if method in ("icskm", "icskm_geo"):
         if landmarks is None:
-            raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
+            raise HamsaError(f"{method} needs landmark pairs (source ids, target ids)")
         features = None
-        if meshes is not None:
+        if method == "icskm_geo":
+            if meshes is None:
+                raise HamsaError("icskm_geo needs the two meshes (for the geodesic distances from the landmarks)")
             features = tuple(GeodesicSolver(mesh).distances_from(ids) for mesh, ids in zip(meshes, landmarks))
         return match_icskm(source, target, *landmarks, features=features)[1]
     raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
@@ -112,9 +122,7 @@ def paired_bases(
         raise HamsaError(f"signs must be one of {SIGNS}, got {signs!r}")
     if not (np.isfinite(mu) and mu > 0):
         raise HamsaError(f"mu must be a positive number, got {mu}")
-    solve = (lambda mesh, V=None: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
-        lambda mesh, V=None: eigenbasis(mesh, k, V)
-    )  # fmt: skip
+    solve = _basis_solver(k, cache_dir)
     lbo = solve(source), solve(target)
     if signs == "truth":
         target_signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4))
@@ -143,44 +151,63 @@ def evaluate_pair(
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
-    ``landmarks``: ground-truth pairs given to ``icskm`` (drawn with ``seed`` among the vertices that have
-    a true image; the same for both bases). ``mu``, ``signs``: the matching potential's scale and how the
-    eigenfunction signs are resolved (see :func:`paired_bases`)."""
+    ``landmarks``: ground-truth pairs given to ``icskm`` / ``icskm_geo`` (drawn with ``seed`` among the
+    vertices that have a true image; the same for both bases). ``mu``, ``signs``: the matching potential's
+    scale and how the eigenfunction signs are resolved (see :func:`paired_bases`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
     candidates = np.flatnonzero(truth >= 0)
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
-    bases = paired_bases(source, target, truth, k, cache_dir, mu, signs)
+    solve = _basis_solver(k, cache_dir)
+    if all(method in _POTENTIAL_OF for method in methods):  # the eigenfunction-sum Hamiltonian is not used
+        bases = {"lbo": (solve(source), solve(target))}
+    else:
+        bases = paired_bases(source, target, truth, k, cache_dir, mu, signs)
+    wanted = {_POTENTIAL_OF.get(method) for method in methods}
+    special = {}  # potential name -> (source V, target V) of the Hamiltonians other than the paper's default
     pairs = None
-    if "icskm" in methods:
+    if "landmarks" in wanted:
         p = np.random.default_rng(seed + 1).choice(candidates, landmarks, replace=False)
         pairs = (p, truth[p])
-        V_s, V_t = potentials.geodesic_distance(source, p), potentials.geodesic_distance(target, truth[p])
-        solve = (lambda mesh, V: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
-            lambda mesh, V: eigenbasis(mesh, k, V)
-        )  # fmt: skip
-        landmark_bases = {"lbo": bases["lbo"], "hamiltonian": (solve(source, V_s), solve(target, V_t))}
-    if "sgfe" in methods:
+        special["landmarks"] = (potentials.geodesic_distance(source, p), potentials.geodesic_distance(target, truth[p]))
+    if "area" in wanted:
         V_s, V_t = _area_distortion_potentials(source, target, truth)
-        solve = (lambda mesh, V: cached_eigenbasis(mesh, k, cache_dir, V)) if cache_dir else (
-            lambda mesh, V: eigenbasis(mesh, k, V)
-        )  # fmt: skip
-        area_bases = {"lbo": bases["lbo"], "hamiltonian": (solve(source, AREA_MU * V_s), solve(target, AREA_MU * V_t))}
+        special["area"] = (AREA_MU * V_s, AREA_MU * V_t)
+    if "texture" in wanted:
+        special["texture"] = tuple(TEXTURE_MU * V for V in _texture_potentials(source, target, truth))
+    for name, (V_s, V_t) in special.items():
+        special[name] = (solve(source, V_s), solve(target, V_t))
     rows, curves = [], {}
     for method in methods:
         for basis in BASES:
-            if method == "icskm":
-                mapping = match_pair(method, *landmark_bases[basis], landmarks=pairs, meshes=(source, target))
-            elif method == "sgfe":
-                mapping = match_pair(method, *area_bases[basis], meshes=(source, target))
+            if basis == "hamiltonian" and method in _POTENTIAL_OF:
+                pair = special[_POTENTIAL_OF[method]]
             else:
-                mapping = match_pair(method, *bases[basis])
+                pair = bases[basis]
+            mapping = match_pair(method, *pair, landmarks=pairs, meshes=(source, target))
             errors = distances.errors(mapping[chosen])
             rows.append({"method": method, "basis": basis, **summary(errors)})
             curves.setdefault(method, {})[basis] = error_curve(errors).tolist()
     return {"rows": rows, "curves": curves}
+
+
+def _basis_solver(k: int, cache_dir):
+    """``solve(mesh, V=None)`` -> Eigenbasis with k pairs, through the on-disk cache when there is one."""
+    if cache_dir:
+        return lambda mesh, V=None: cached_eigenbasis(mesh, k, cache_dir, V)
+    return lambda mesh, V=None: eigenbasis(mesh, k, V)
+
+
+def _texture_potentials(source: TriMesh, target: TriMesh, truth: np.ndarray):
+    """Luminance in [0, 1] of a seeded dalmatian coat painted on the source and carried to the target by
+    the ground truth (white where no source vertex maps)."""
+    luminance = potentials.from_vertex_colors(source, potentials.dalmatian_texture(source))
+    known = np.flatnonzero(truth >= 0)
+    carried = np.ones(target.n_vertices)
+    carried[truth[known]] = luminance[known]
+    return luminance, carried
 
 
 def _area_distortion_potentials(source: TriMesh, target: TriMesh, truth: np.ndarray):
@@ -292,7 +319,7 @@ def benchmark_dataset(
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
-    if "icskm" in methods:
+    if {"icskm", "icskm_geo"} & set(methods):
         settings["landmarks"] = int(landmarks)
     if mu != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
         settings.update(mu=float(mu), signs=signs)

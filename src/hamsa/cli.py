@@ -70,6 +70,8 @@ def _load_for_operators(path: str, repair: bool):
 
 
 def _parser() -> argparse.ArgumentParser:
+    from hamsa.benchmark import METHODS as BENCHMARK_METHODS
+
     parser = argparse.ArgumentParser(
         prog="hamsa",
         description="Hamiltonian spectral shape analysis: eigenbases of -Laplacian + V on triangle meshes.",
@@ -170,11 +172,18 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--method",
         nargs="+",
-        choices=("hks", "wks", "fmap", "icskm", "sgfe"),
-        default=["hks", "wks", "fmap", "icskm", "sgfe"],
+        choices=BENCHMARK_METHODS,
+        default=list(BENCHMARK_METHODS),
+        help="hks, wks: descriptor nearest neighbours; fmap: functional map + ICP + ZoomOut; icskm: the paper's "
+        "ICSKM from --landmarks ground-truth pairs; icskm_geo: the same plus geodesic distances from the landmarks "
+        "as features; sgfe: spectral gradient fields (area-distortion potential); texture: HKS with a synthetic "
+        "dalmatian-coat potential (default: all)",
     )
     bench.add_argument(
-        "--landmarks", type=_positive_int, default=3, help="icskm: ground-truth landmark pairs per pair (default 3)"
+        "--landmarks",
+        type=_positive_int,
+        default=3,
+        help="icskm, icskm_geo: ground-truth landmark pairs per pair (default 3)",
     )
     bench.add_argument(
         "--mu",
