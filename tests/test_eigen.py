@@ -143,21 +143,24 @@ def test_warm_start_equals_cold_start(sphere_5k):
     assert np.all(np.abs(np.linalg.svd(overlap[:15, :15], compute_uv=False)) > 1 - 1e-8)
 
 
-def test_solver_object_warm_starts_match_cold_solves_and_keep_signs(sphere_5k):
+@pytest.mark.parametrize("method", ["krylov", "chebyshev"])
+def test_solver_object_warm_starts_match_cold_solves_and_keep_signs(sphere_5k, method):
     """HamiltonianEigensolver over a sequence of potentials: each warm-started result equals a cold
-    solve (values 1e-9, eigenvectors up to sign), signs follow the previous call, and the factorization's
-    symbolic analysis is reused."""
+    solve (values 1e-9, eigenvectors up to sign), signs follow the previous call; Krylov reuses the
+    factorization's symbolic analysis, Chebyshev restarts from its whole previous block (fewer products)."""
     from hamsa.eigen import HamiltonianEigensolver
 
     rng = np.random.default_rng(3)
     mesh = hamsa.TriMesh(sphere_5k.vertices * (1 + 0.1 * sphere_5k.vertices[:, :1] ** 2), sphere_5k.faces)
-    solver = HamiltonianEigensolver.for_mesh(mesh, 12, method="krylov")
+    solver = HamiltonianEigensolver.for_mesh(mesh, 12, method=method)
     V = 4 * rng.random(mesh.n_vertices)
     first = solver.solve(V)
-    symbolic = solver.factor._symbolic
+    symbolic = solver.factor._symbolic if method == "krylov" else None
     V2 = V * (1 + 0.05 * rng.standard_normal(V.size))
     second = solver.solve(V2)
-    fresh = solve(mesh, 12, V2)
+    fresh = solve(mesh, 12, V2, method=method)
+    if method == "chebyshev":
+        assert second.info.solves < 0.75 * fresh.info.solves, (second.info, fresh.info)
     np.testing.assert_allclose(second.values, fresh.values, rtol=1e-9)
     np.testing.assert_allclose(np.abs(second.vectors.T @ second.mass @ fresh.vectors), np.eye(12), atol=1e-6)
     assert solver.continues.tolist() == list(range(12))

@@ -64,6 +64,7 @@ def chebyshev_eigsh(
     guard: int | None = None,
     max_iterations: int = 300,
     seed: int = 12345,
+    return_block: bool = False,
 ):
     """The k smallest eigenpairs of ``H psi = E diag(a) psi`` by Chebyshev-filtered subspace iteration.
 
@@ -79,14 +80,18 @@ def chebyshev_eigsh(
     device : {"cpu", "cuda"}
         "cuda" runs every step on the GPU with CuPy.
     initial : (n, p), optional
-        Start vectors (previous eigenvectors: a warm start).
+        Start vectors (previous eigenvectors: a warm start), a NumPy array or, on "cuda", a CuPy one.
+        Best is the whole previous Ritz block (``return_block``): with only the k eigenvectors the
+        guard vectors restart random and the first filter is aimed at a far too wide interval.
     guard : int, optional
         Extra vectors in the block (default max(10, k // 4)): more converge faster near the k-th.
 
     Returns
     -------
     values (k,), vectors (n, k) NumPy arrays with ``vectors.T @ diag(a) @ vectors = I``, and a dict with
-    ``iterations``, ``products`` (sparse block products), ``max_residual``, ``seconds``.
+    ``iterations``, ``products`` (sparse block products), ``max_residual``, ``seconds``, ``block`` (m),
+    and with ``return_block`` ``ritz_block``: all m Ritz vectors (n, m), mass-orthonormal, left on the
+    device (a CuPy array on "cuda") to be the next call's ``initial``.
     """
     start_time = time.perf_counter()
     xp, xsp = array_modules(device)
@@ -107,8 +112,8 @@ def chebyshev_eigsh(
 
     X = xp.random.RandomState(seed).standard_normal((n, m))  # drawn where it is used
     if initial is not None:
-        initial = np.asarray(initial, dtype=np.float64).reshape(n, -1)[:, :m]
-        X[:, : initial.shape[1]] = xp.asarray(initial * np.sqrt(mass_diagonal)[:, None])
+        initial = xp.asarray(initial, dtype=np.float64).reshape(n, -1)[:, :m]
+        X[:, : initial.shape[1]] = initial * xp.asarray(np.sqrt(mass_diagonal))[:, None]
     X = xp.linalg.qr(X)[0]
     products, iterations = 0, 0
     while True:
@@ -134,14 +139,13 @@ def chebyshev_eigsh(
         lowest, cut = float(theta_host[0]), float(theta_host[-1])
         if not cut < upper:
             raise SolverError("the block reached the top of the spectrum: ask for fewer eigenpairs (k << n)")
-        degree = _filter_degree(lowest, cut, upper)
+        degree = _filter_degree(lowest, cut, upper, theta_host[:k], relative / tol)
         X = _chebyshev_filter(M, X, MX, degree, lowest, cut, upper)
         products += degree - 1
         X = xp.linalg.qr(X)[0]
     del MX
-    vectors = X[:, :k] * xp.asarray(scale)[:, None]
-    if device == "cuda":
-        vectors, theta_host = xp.asnumpy(vectors), theta_host
+    block = X * xp.asarray(scale)[:, None]
+    vectors = xp.asnumpy(block[:, :k]) if device == "cuda" else block[:, :k].copy()
     info = {
         "iterations": iterations,
         "products": products,
@@ -149,14 +153,24 @@ def chebyshev_eigsh(
         "seconds": time.perf_counter() - start_time,
         "block": m,
     }
+    if return_block:
+        info["ritz_block"] = block
     return np.asarray(theta_host[:k], dtype=np.float64), np.asarray(vectors), info
 
 
-def _filter_degree(lowest: float, cut: float, upper: float) -> int:
-    """The largest degree whose amplification of the lowest Ritz value stays below ~1e8."""
+def _filter_degree(lowest: float, cut: float, upper: float, wanted: np.ndarray, excess: np.ndarray) -> int:
+    """The filter degree: the smallest that shrinks every wanted Ritz pair's residual below the target
+    (a wanted eigenvalue E gains ``T_d(1 + (cut - E) / half_width)`` over the unwanted spectrum; ``excess``
+    is each pair's residual / target, with a margin of 10), and at most the largest degree whose
+    amplification of the lowest Ritz value stays below ~1e8 (the block stays well conditioned). From a
+    random start the cap decides; from a warm start (or in the last iteration) the need does, so
+    converged pairs are not filtered further than the target asks."""
     half_width = (upper - cut) / 2
     x = 1 + (cut - lowest) / half_width
-    return int(np.clip(np.arccosh(_MAX_AMPLIFICATION) / np.arccosh(max(x, 1 + 1e-12)), 4, 600))
+    cap = np.arccosh(_MAX_AMPLIFICATION) / np.arccosh(max(x, 1 + 1e-12))
+    gain = np.arccosh(np.maximum(1 + (cut - wanted) / half_width, 1 + 1e-12))
+    need = np.max(np.arccosh(np.maximum(10 * excess, 1.0)) / gain)
+    return int(np.clip(np.ceil(min(need, cap)), 4, 600))
 
 
 def _chebyshev_filter(M, X, MX, degree: int, lowest: float, cut: float, upper: float):
