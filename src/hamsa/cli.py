@@ -405,9 +405,14 @@ def _modes(args) -> None:
     if args.unit_area:
         mesh = TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)
 
-    def report(index, iterations, objective):
+    def report(stage, index, iterations, objective):
+        if stage == "admm":
+            if iterations % 100 == 0:
+                print(f"  ADMM iteration {iterations}: objective {objective:.6g}", file=sys.stderr, flush=True)
+            return
+        what = "mode" if stage == "greedy" else "refining mode"
         print(
-            f"  mode {index + 1}/{args.K}: {iterations} IRLS iterations, objective {objective:.6g}",
+            f"  {what} {index + 1}/{args.K}: {iterations} IRLS iterations, objective {objective:.6g}",
             file=sys.stderr,
             flush=True,
         )

@@ -135,7 +135,10 @@ def compressed_modes(
         |phi|; "vector": the plain ``sum_j |phi_j|`` of Neumann et al.'s code, which depends on the sampling
         (denser regions weigh more) — for comparisons only
     seed : the start vectors are the LBO eigenvectors plus 10% seeded noise
-    callback : optional ``callback(mode_index, iterations, objective)`` after each mode (progress)
+    callback : optional ``callback(stage, mode_index, iterations, objective)`` for progress: stage
+        "greedy" after each mode of the first pass, "refinement" after each mode of the joint refinement
+        (iterations: that pass's), "admm" after each ADMM iteration (mode_index -1: all modes at once;
+        objective: of all K modes)
     """
     if method not in ("hamiltonian", "admm"):
         raise HamsaError(f"method must be 'hamiltonian' or 'admm', got {method!r}")
@@ -186,7 +189,7 @@ def compressed_modes(
         iterations.append(iteration)
         history.append({"objective": trace, "majorized": majorized})
         if callback is not None:
-            callback(i, iteration, trace[-1])
+            callback("greedy", i, iteration, trace[-1])
     if refine and K > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
         _rotate_to_lower_l1(modes, weights)
         for i in range(K):
@@ -200,6 +203,8 @@ def compressed_modes(
             iterations[i] += iteration
             history[i]["objective"] += trace[1:]
             history[i]["majorized"] += majorized
+            if callback is not None:
+                callback("refinement", i, iteration, trace[-1])
     gram = modes.T @ (areas[:, None] * modes)
     return CompressedModes(
         modes=modes,
@@ -308,7 +313,7 @@ def _admm_modes(
             value = mode_objective(W, weights, psi / root, mu)
             history.append(value)
             if callback is not None:
-                callback(-1, iteration, value)
+                callback("admm", -1, iteration, value)
             if abs(value - objective) <= tol * abs(objective):
                 break
             objective = value
