@@ -11,8 +11,10 @@ Shift-invert block Krylov with thick restarts and a dense Rayleigh-Ritz, in the 
 2. The operator ``S = K^{-1} A`` is self-adjoint in ``<x, y>_A`` and maps eigenvector psi_i to
    ``psi_i / (E_i - sigma)``: the wanted eigenpairs are its dominant ones. From a block of start
    vectors the basis grows block by block, ``Z <- S Z`` (one multi-right-hand-side solve per block),
-   each new block A-orthogonalized against the basis (two passes of classical Gram-Schmidt) and
-   orthonormalized by SVQB (Stathopoulos & Wu 2002), which also drops dependent directions.
+   each new block A-orthogonalized against the basis (classical Gram-Schmidt: a first pass against the
+   previous block only — the block Lanczos recurrence, exact but for rounding — then one pass against
+   the whole basis) and orthonormalized by SVQB (Stathopoulos & Wu 2002), which also drops dependent
+   directions.
 3. Rayleigh-Ritz with H on the basis gives Ritz pairs; convergence is tested on the true residuals
    ``r_i = H x_i - E_i A x_i``. The basis is then shrunk to the best ``k + guard`` Ritz vectors (a thick
    restart, as in Wu & Simon 2000 and Stewart's Krylov-Schur) and the Krylov growth continues from the
