@@ -76,3 +76,22 @@ def test_texture_and_landmark_feature_methods_on_a_pose_pair(pose_dataset):
         assert by[("icskm_geo", basis)]["within_0.05"] > 0.9
     with pytest.raises(HamsaError, match="icskm_geo needs the two meshes"):
         match_pair("icskm_geo", None, None, landmarks=([0], [0]))
+
+
+def test_dataset_benchmark_on_a_dask_cluster_equals_the_local_run(pose_dataset, tmp_path):
+    """The pairs run on a Dask cluster given its scheduler address (here an in-process LocalCluster) and
+    score exactly as in local worker processes."""
+    distributed = pytest.importorskip("distributed", reason="the Dask path needs the [dask] extra")
+    dataset = load_folder(pose_dataset)
+    local = benchmark_dataset(dataset, tmp_path / "local", methods=("hks",), k=30, points=200, progress=False)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as c:
+        remote = benchmark_dataset(
+            dataset,
+            tmp_path / "dask",
+            methods=("hks",),
+            k=30,
+            points=200,
+            scheduler=c.scheduler_address,
+            progress=False,
+        )
+    assert remote == local and len(list((tmp_path / "dask" / "pairs").glob("*.json"))) == 2
