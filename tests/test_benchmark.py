@@ -95,3 +95,21 @@ def test_dataset_benchmark_on_a_dask_cluster_equals_the_local_run(pose_dataset, 
             progress=False,
         )
     assert remote == local and len(list((tmp_path / "dask" / "pairs").glob("*.json"))) == 2
+
+
+def test_summary_per_class_averages_each_class_and_the_whole():
+    from hamsa.benchmark import summarize, table_markdown
+
+    def record(source, auc):
+        rows = [{"method": "hks", "basis": b, "auc": auc, "mean_error": 1 - auc, "within_0.05": auc} for b in
+                ("lbo", "hamiltonian")]  # fmt: skip
+        return {"source": source, "rows": rows}
+
+    records = [record("cat0", 0.2), record("cat0", 0.4), record("dog0", 0.9)]
+    table = summarize(records, "TOSCA", {"cat0": "cat", "dog0": "dog"})
+    assert [round(r["auc"], 6) for r in table["rows"]] == [0.5, 0.5]  # over pairs, not over classes
+    by_class = {(r["class"], r["basis"]): r for r in table["by_class"]}
+    assert np.isclose(by_class[("cat", "lbo")]["auc"], 0.3) and by_class[("dog", "hamiltonian")]["pairs"] == 1
+    text = table_markdown(table)
+    assert text.count("| dataset |") == 1 and text.count("| class |") == 1 and "| dog | hks | lbo | 1 |" in text
+    assert "by_class" not in summarize(records[:2], "TOSCA", {"cat0": "cat"})  # one class: no breakdown

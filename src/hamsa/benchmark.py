@@ -333,7 +333,7 @@ def benchmark_dataset(
         else:
             todo.append((source, target, path))
     records += _run_parallel(dataset, todo, settings, jobs, scheduler, progress)
-    table = summarize(records, dataset.name)
+    table = summarize(records, dataset.name, dataset.classes)
     _write_outputs(output, table, records, dataset.name)
     return table
 
@@ -363,35 +363,47 @@ def _run_parallel(dataset, todo, settings, jobs, scheduler, progress) -> list[di
     return results
 
 
-def summarize(records: list[dict], dataset_name: str) -> dict:
-    """Mean AUC, mean error and fraction within 0.05 per method x basis over the pairs."""
+def summarize(records: list[dict], dataset_name: str, classes: dict | None = None) -> dict:
+    """Mean AUC, mean error and fraction within 0.05 per method x basis over the pairs; with ``classes``
+    (shape name -> class, e.g. :attr:`Dataset.classes`) of more than one class, also per class of the
+    source shape (``by_class``)."""
+    table = {"dataset": dataset_name, "pairs": len(records), "rows": _mean_rows(records, {"dataset": dataset_name})}
+    groups: dict[str, list[dict]] = {}
+    for record in records:
+        groups.setdefault((classes or {}).get(record.get("source"), ""), []).append(record)
+    if classes and len(groups) > 1:
+        table["by_class"] = [row for name in sorted(groups) for row in _mean_rows(groups[name], {"class": name})]
+    return table
+
+
+def _mean_rows(records: list[dict], label: dict) -> list[dict]:
     rows = []
     for method in METHODS:
         for basis in BASES:
             found = [r for record in records for r in record["rows"] if r["method"] == method and r["basis"] == basis]
             if found:
-                rows.append(
-                    {
-                        "dataset": dataset_name,
-                        "method": method,
-                        "basis": basis,
-                        "pairs": len(found),
-                        **{key: float(np.mean([r[key] for r in found])) for key in SCORES},
-                    }
-                )
-    return {"dataset": dataset_name, "pairs": len(records), "rows": rows}
+                scores = {key: float(np.mean([r[key] for r in found])) for key in SCORES}
+                rows.append({**label, "method": method, "basis": basis, "pairs": len(found), **scores})
+    return rows
 
 
 def table_markdown(table: dict) -> str:
-    lines = [
-        "| dataset | method | basis | pairs | AUC [0, 0.25] | mean error | within 0.05 |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in table["rows"]:
-        lines.append(
-            f"| {r['dataset']} | {r['method']} | {r['basis']} | {r['pairs']} | {r['auc']:.3f} | "
-            f"{r['mean_error']:.4f} | {100 * r['within_0.05']:.1f}% |"
-        )
+    """The summary as Markdown: one table per dataset, then one per class when there are several."""
+    lines = []
+    for key, rows in (("dataset", table["rows"]), ("class", table.get("by_class", []))):
+        if not rows:
+            continue
+        if lines:
+            lines.append("")
+        lines += [
+            f"| {key} | method | basis | pairs | AUC [0, 0.25] | mean error | within 0.05 |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in rows:
+            lines.append(
+                f"| {r[key]} | {r['method']} | {r['basis']} | {r['pairs']} | {r['auc']:.3f} | "
+                f"{r['mean_error']:.4f} | {100 * r['within_0.05']:.1f}% |"
+            )
     return "\n".join(lines) + "\n"
 
 
