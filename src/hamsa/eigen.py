@@ -614,8 +614,9 @@ class HamiltonianEigensolver:
     k : int
     tol, method, backend, device
         As in :func:`eigenbasis`. With ``method="chebyshev"`` (the choice on ``device="cuda"``) the warm
-        start is the previous call's whole Ritz block, kept on the device: it halves the filter work
-        after a 5% change of V (``benchmarks/eigensolve.py --warm``).
+        start is the previous call's whole Ritz block, kept on the device: after a 5% change of V,
+        1.5-1.7x fewer sparse products than a cold solve (10k vertices, k = 50; only the k vectors:
+        1.03-1.13x).
     mass_kind : str
         Recorded in the returned bases.
 
