@@ -103,9 +103,17 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
         if method == "icskm_geo":
             if meshes is None:
                 raise HamsaError("icskm_geo needs the two meshes (for the geodesic distances from the landmarks)")
-            features = tuple(GeodesicSolver(mesh).distances_from(ids) for mesh, ids in zip(meshes, landmarks))
+            features = tuple(
+                _reachable(GeodesicSolver(mesh).distances_from(ids)) for mesh, ids in zip(meshes, landmarks)
+            )
         return match_icskm(source, target, *landmarks, features=features)[1]
     raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
+
+
+def _reachable(distances: np.ndarray) -> np.ndarray:
+    """Distances (n, m) with the infinite ones (pieces without the source) set to each column's largest finite."""
+    finite = np.isfinite(distances)
+    return np.where(finite, distances, np.where(finite, distances, -np.inf).max(axis=0))
 
 
 def paired_bases(
@@ -171,7 +179,10 @@ def evaluate_pair(
     if "landmarks" in wanted:
         p = np.random.default_rng(seed + 1).choice(candidates, landmarks, replace=False)
         pairs = (p, truth[p])
-        special["landmarks"] = (potentials.geodesic_distance(source, p), potentials.geodesic_distance(target, truth[p]))
+        special["landmarks"] = (  # pieces without a landmark (TOSCA's gorilla) count as farthest
+            potentials.geodesic_distance(source, p, unreachable=1.0),
+            potentials.geodesic_distance(target, truth[p], unreachable=1.0),
+        )
     if "area" in wanted:
         V_s, V_t = _area_distortion_potentials(source, target, truth)
         special["area"] = (AREA_MU * V_s, AREA_MU * V_t)

@@ -451,7 +451,10 @@ def _match(args) -> None:
         raise HamsaError("--landmarks is for --method icskm")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
     if args.method == "icskm" and args.potential_scale != 0:
-        V = [args.potential_scale * potentials.geodesic_distance(m, ids) for m, ids in zip(meshes, landmarks)]
+        V = [
+            args.potential_scale * potentials.geodesic_distance(m, ids, unreachable=1.0)
+            for m, ids in zip(meshes, landmarks)
+        ]
         source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
     else:
         source, target = (eigenbasis(mesh, k) for mesh in meshes)

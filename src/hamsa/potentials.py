@@ -51,19 +51,29 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
     return np.where(mask, float(height), 0.0)
 
 
-def geodesic_distance(mesh, sources, normalize: bool = True) -> np.ndarray:
+def geodesic_distance(mesh, sources, normalize: bool = True, unreachable: float | None = None) -> np.ndarray:
     """Geodesic distance from the nearest of ``sources`` (heat method, :mod:`hamsa.geodesic`).
 
-    With ``normalize=True`` (default) the distance is divided by its maximum, so V is in [0, 1]
-    (0 at the landmarks): the paper's landmark potential for ICSKM and the diffusion figure.
+    With ``normalize=True`` (default) the distance is divided by its largest finite value, so V is in
+    [0, 1] (0 at the landmarks): the paper's landmark potential for ICSKM and the diffusion figure.
+    On a mesh of several pieces, a piece without a source is infinitely far: an error, unless
+    ``unreachable`` gives the value to put there (e.g. 1.0, as far as the farthest reachable vertex,
+    for the loose bits of TOSCA's gorilla).
     """
     distance = _heat_geodesic(mesh, sources)
-    if not normalize:
-        return distance
     finite = np.isfinite(distance)
     if not np.all(finite):
-        raise PotentialError("some connected components contain no source; their distance is infinite")
-    return distance / distance.max()
+        if unreachable is None:
+            raise PotentialError(
+                "some connected components contain no source; their distance is infinite (pass unreachable= "
+                "to give them a value)"
+            )
+        if not np.isfinite(unreachable):
+            raise PotentialError(f"unreachable must be a finite number, got {unreachable}")
+    if normalize:
+        distance = distance / distance[finite].max()
+    distance[~finite] = unreachable if unreachable is not None else np.inf
+    return distance
 
 
 def eigenfunction_sum(basis: Eigenbasis, indices=(1, 2, 3, 4), signs=None) -> np.ndarray:
