@@ -86,3 +86,14 @@ def test_as_trimesh_accepts_pairs_and_rejects_others():
     assert as_trimesh((TRI, [[0, 1, 2]])).n_faces == 1
     with pytest.raises(MeshError, match="expected a TriMesh"):
         as_trimesh("mesh.off")
+
+
+def test_largest_component_keeps_the_body_and_its_vertex_ids():
+    body, bit = shapes.icosphere(2), shapes.icosphere(0)
+    faces = np.vstack([bit.faces, bit.faces + bit.n_vertices])  # two loose bits first
+    vertices = np.vstack([bit.vertices + 5, bit.vertices - 5])
+    mesh = hamsa.TriMesh(np.vstack([vertices, body.vertices]), np.vstack([faces, body.faces + len(vertices)]))
+    kept_mesh, kept = mesh.largest_component()
+    np.testing.assert_array_equal(kept, np.arange(len(vertices), mesh.n_vertices))
+    np.testing.assert_array_equal(kept_mesh.faces, body.faces)
+    assert kept_mesh.n_components == 1 and body.largest_component()[0] is body

@@ -49,11 +49,16 @@ class Dataset:
     def __len__(self) -> int:
         return len(self.shapes)
 
-    def load(self, shape: str, drop_unreferenced: bool = True) -> tuple[TriMesh, np.ndarray]:
-        """(mesh, kept): the mesh, without unreferenced vertices unless asked, and the kept original ids."""
+    def load(
+        self, shape: str, drop_unreferenced: bool = True, largest_component: bool = False
+    ) -> tuple[TriMesh, np.ndarray]:
+        """(mesh, kept): the mesh, without unreferenced vertices unless asked (or only its largest connected
+        component), and the kept original ids."""
         if shape not in self.shapes:
             raise HamsaError(f"dataset {self.name!r} has no shape {shape!r}")
         mesh = load_mesh(self.shapes[shape])
+        if largest_component:
+            return mesh.largest_component()
         if drop_unreferenced:
             return mesh.without_unreferenced()
         return mesh, np.arange(mesh.n_vertices)

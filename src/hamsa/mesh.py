@@ -217,6 +217,19 @@ class TriMesh:
         new_index[kept] = np.arange(len(kept))
         return TriMesh(self._vertices[kept], new_index[self._faces]), kept
 
+    def largest_component(self) -> tuple[TriMesh, np.ndarray]:
+        """The connected component with the most vertices, as ``(mesh, kept)`` like
+        :meth:`without_unreferenced` (``kept[i]``: this mesh's index of the new mesh's vertex i). TOSCA's
+        gorilla, for one, has 37 loose pieces beside its 25 438-vertex body (the Kim et al. benchmark
+        keeps the body alone)."""
+        count, labels = self.vertex_components
+        if count <= 1:
+            return self.without_unreferenced()
+        biggest = np.argmax(np.bincount(labels[labels >= 0]))
+        faces = self._faces[labels[self._faces[:, 0]] == biggest]
+        body, kept = TriMesh(self._vertices, faces).without_unreferenced()
+        return body, kept
+
     def require_operator_ready(self) -> None:
         """Raise MeshError if the mesh has vertices without area (operators would be singular)."""
         if len(self.unreferenced_vertices):
