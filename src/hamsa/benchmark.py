@@ -212,14 +212,20 @@ def _basis_solver(k: int, cache_dir):
     return lambda mesh, V=None: eigenbasis(mesh, k, V)
 
 
+def carried_to_target(values: np.ndarray, truth: np.ndarray, n_target: int, fill: float = 1.0) -> np.ndarray:
+    """Per-vertex source ``values`` (n_s,) moved to the target by the ground truth (n_s,) target ids (-1:
+    unknown): (n_target,), ``fill`` where no source vertex maps (1.0: white, for a luminance)."""
+    known = np.flatnonzero(truth >= 0)
+    carried = np.full(n_target, fill, dtype=np.float64)
+    carried[truth[known]] = values[known]
+    return carried
+
+
 def _texture_potentials(source: TriMesh, target: TriMesh, truth: np.ndarray):
     """Luminance in [0, 1] of a seeded dalmatian coat painted on the source and carried to the target by
     the ground truth (white where no source vertex maps)."""
     luminance = potentials.from_vertex_colors(source, potentials.dalmatian_texture(source))
-    known = np.flatnonzero(truth >= 0)
-    carried = np.ones(target.n_vertices)
-    carried[truth[known]] = luminance[known]
-    return luminance, carried
+    return luminance, carried_to_target(luminance, truth, target.n_vertices)
 
 
 def _area_distortion_potentials(source: TriMesh, target: TriMesh, truth: np.ndarray):

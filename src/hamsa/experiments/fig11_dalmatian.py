@@ -22,13 +22,13 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, shapes, viz
-from hamsa.benchmark import _identity_truth, match_pair
+from hamsa.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, match_pair
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, unit_area, write_json
 
-MU = 100.0
+MU = TEXTURE_MU
 METHODS = ("hks", "wks")
 
 
@@ -67,8 +67,7 @@ def run(args) -> dict:
     rows = []
     for source_name, target_name, _, target, truth in pairs:
         known = np.flatnonzero(truth >= 0)
-        carried = np.ones(target.n_vertices)  # white where no source vertex maps
-        carried[truth[known]] = luminance[known]
+        carried = carried_to_target(luminance, truth, target.n_vertices)  # white where no source vertex maps
         points = known[sample_points(len(known), 1000, 0)]
         distances = TruthDistances(target, truth[points])
         bases = {
