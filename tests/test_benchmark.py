@@ -64,6 +64,23 @@ def test_cli_benchmark_matching(pose_dataset, tmp_path, capsys):
     assert main(["benchmark-matching", str(tmp_path / "nowhere"), "-o", str(out)]) == 2
 
 
+def test_a_failing_pair_is_reported_and_the_others_still_run(pose_dataset, tmp_path, capsys):
+    root = tmp_path / "data"
+    (root / "meshes").mkdir(parents=True)
+    for name in ("humanoid0", "humanoid1"):
+        (root / "meshes" / f"{name}.off").write_bytes((pose_dataset / "meshes" / f"{name}.off").read_bytes())
+    (root / "meshes" / "humanoid2.off").write_text("OFF\n3 1 0\n0 0 0\n")  # truncated file
+    out = tmp_path / "results"
+    table = benchmark_dataset(load_folder(root), out, methods=("hks",), k=30, points=200, progress=False)
+    assert table["pairs"] == 1 and [(f["source"], f["target"]) for f in table["failed"]] == [("humanoid0", "humanoid2")]
+    assert "humanoid2" in table["failed"][0]["error"]
+    assert sorted(p.name for p in (out / "pairs").glob("*.json")) == ["humanoid0__humanoid1.json"]
+    assert "1 pair(s) failed" in (out / "table.md").read_text()
+    code = main(["benchmark-matching", str(root), "--method", "hks", "-k", "30", "--points", "200", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code != 0 and "1 of 2 pairs failed" in captured.err and "| hks | hamiltonian |" in captured.out
+
+
 def test_texture_and_landmark_feature_methods_on_a_pose_pair(pose_dataset):
     dataset = load_folder(pose_dataset)
     (source, _), (target, _) = dataset.load("humanoid0"), dataset.load("humanoid1")

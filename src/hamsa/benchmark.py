@@ -286,6 +286,16 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
     return record
 
 
+def _run_pair_or_failure(dataset: Dataset, source_name: str, target_name: str, settings: dict, path: Path) -> dict:
+    """:func:`_run_pair`, or ``{"source", "target", "error"}`` when the pair fails (an unreadable mesh, a
+    failed solve): one bad pair does not stop a run of hours. Nothing is written for it, so the next run
+    retries it."""
+    try:
+        return _run_pair(dataset, source_name, target_name, settings, path)
+    except Exception as error:  # reported in the table and by the CLI's exit status, never dropped
+        return {"source": source_name, "target": target_name, "error": f"{type(error).__name__}: {error}"}
+
+
 def _unit_area(mesh: TriMesh) -> TriMesh:
     return TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
 
@@ -319,6 +329,10 @@ def benchmark_dataset(
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
+    A pair that fails (an unreadable mesh, a failed solve) does not stop the others: it is left out of the
+    means and listed under ``table["failed"]`` (source, target, error), in ``table.md`` too; a rerun
+    retries only the failed and unfinished pairs.
+
     Parameters
     ----------
     dataset : a Dataset (:func:`hamsa.datasets.load_tosca`, ``load_scape``, ``load_folder``)
@@ -350,8 +364,12 @@ def benchmark_dataset(
             records.append(done)
         else:
             todo.append((source, target, path))
-    records += _run_parallel(dataset, todo, settings, jobs, scheduler, progress)
+    results = _run_parallel(dataset, todo, settings, jobs, scheduler, progress)
+    records += [result for result in results if "error" not in result]
     table = summarize(records, dataset.name, dataset.classes)
+    failed = [result for result in results if "error" in result]
+    if failed:
+        table["failed"] = sorted(failed, key=lambda result: (result["source"], result["target"]))
     _write_outputs(output, table, records, dataset.name)
     return table
 
@@ -365,7 +383,7 @@ def _run_parallel(dataset, todo, settings, jobs, scheduler, progress) -> list[di
         raise HamsaError("dataset benchmarks need joblib: pip install 'hamsa[bench]'") from None
     from tqdm.auto import tqdm
 
-    tasks = (joblib.delayed(_run_pair)(dataset, s, t, settings, path) for s, t, path in todo)
+    tasks = (joblib.delayed(_run_pair_or_failure)(dataset, s, t, settings, path) for s, t, path in todo)
     results = []
     if scheduler:
         try:
@@ -422,6 +440,10 @@ def table_markdown(table: dict) -> str:
                 f"| {r[key]} | {r['method']} | {r['basis']} | {r['pairs']} | {r['auc']:.3f} | "
                 f"{r['mean_error']:.4f} | {100 * r['within_0.05']:.1f}% |"
             )
+    failed = table.get("failed", [])
+    if failed:
+        lines += ["", f"{len(failed)} pair(s) failed (not in the table; a rerun retries them):"]
+        lines += [f"- {f['source']} -> {f['target']}: {f['error']}" for f in failed]
     return "\n".join(lines) + "\n"
 
 

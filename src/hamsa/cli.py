@@ -517,6 +517,11 @@ def _benchmark_matching(args) -> None:
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")
+    if table.get("failed"):
+        raise HamsaError(
+            f"{len(table['failed'])} of {len(table['failed']) + table['pairs']} pairs failed (listed above and in "
+            "table.json); the table covers the others, and a rerun with the same options retries only the failed ones"
+        )
 
 
 def _view(args) -> None:
