@@ -196,6 +196,52 @@ def offdiagonal_energy(C: np.ndarray) -> float:
     return float(np.linalg.norm(C - diagonal) / total)
 
 
+def intrinsic_symmetry_signs(
+    basis: Eigenbasis, count: int = 20, sample: int = 500, database: int = 10000, seed: int = 0
+) -> tuple[np.ndarray, float]:
+    """The sign pattern of a shape's best non-identity intrinsic self-symmetry (Ovsjanikov et al. 2008).
+
+    An intrinsic symmetry T (an isometry of the shape onto itself) maps every eigenfunction of a simple
+    eigenvalue to plus or minus itself, ``psi_i o T = s_i psi_i``, so it acts on the spectral embedding
+    ``g(x) = (psi_i(x) / sqrt|E_i|)_{i=1..count}`` as a sign flip. The signs are found greedily: for each
+    candidate first flipped function j (the identity is excluded), the later signs are chosen one at a
+    time by the nearest-neighbour residual ``mean_x min_y |g(x) s - g(y)|^2 / mean |g|^2`` on seeded
+    samples (``sample`` queries, ``database`` candidates), and the pattern with the lowest residual wins.
+    The ground state (index 0: the constant, or a Hamiltonian's positive ground state) is kept.
+
+    Returns
+    -------
+    (signs (count + 1,) of +-1 for psi_0..psi_count, residual): a residual well below 0.01 means the shape
+    has that symmetry; a larger one, that the pattern is only the least bad (no symmetry found)
+    """
+    count = min(int(count), basis.k - 1)
+    if count < 1:
+        raise HamsaError(f"need at least two eigenpairs to look for a symmetry, got k = {basis.k}")
+    rng = np.random.default_rng(seed)
+    queries = rng.choice(basis.n, min(sample, basis.n), replace=False)
+    candidates = rng.choice(basis.n, min(database, basis.n), replace=False)
+    spectrum = np.abs(basis.values[1 : count + 1])
+    embedding = basis.vectors[:, 1 : count + 1] / np.sqrt(np.maximum(spectrum, 1e-9 * spectrum.max()))
+    size = np.mean(np.sum(embedding[queries] ** 2, axis=1))
+
+    def residual(signs, m):
+        flipped = embedding[queries, :m] * signs[:m]
+        nearest = candidates[nearest_rows(flipped, embedding[candidates, :m])]
+        return float(np.mean(np.sum((flipped - embedding[nearest, :m]) ** 2, axis=1)) / size)
+
+    best = (np.inf, None)
+    for first in range(count):
+        signs = np.ones(count)
+        signs[first] = -1.0
+        for i in range(first + 1, count):
+            keep = residual(signs, i + 1)
+            signs[i] = -1.0
+            if keep <= residual(signs, i + 1):
+                signs[i] = 1.0
+        best = min(best, (residual(signs, count), signs), key=lambda pair: pair[0])
+    return np.concatenate([[1.0], best[1]]), best[0]
+
+
 def match_icskm(
     source: Eigenbasis,
     target: Eigenbasis,
@@ -209,6 +255,7 @@ def match_icskm(
     seed: int = 0,
     features: tuple[np.ndarray, np.ndarray] | None = None,
     feature_weight: float = 0.2,
+    symmetry_restart: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
@@ -222,6 +269,14 @@ def match_icskm(
     weight of an ordinary vertex pair. Works with any basis: the LBO's or a Hamiltonian's (the paper uses
     V = geodesic distance from the landmarks, :func:`hamsa.potentials.geodesic_distance`).
 
+    On a symmetric shape the coarse scales cannot tell the map from its mirror image (their nearest-neighbour
+    energy can even favour the mirror), so a wrong sign of the first antisymmetric eigenfunction in the
+    initial C stays through the whole schedule as a partial left-right flip. With ``symmetry_restart`` the
+    ICP is run a second time from the initial C with that sign flipped (the first eigenfunction that the
+    source's intrinsic symmetry, :func:`intrinsic_symmetry_signs`, reverses), and the run with the lower
+    energy at the finest scale (nearest-neighbour distances plus the landmark term, the quantity ICP
+    minimizes) is kept. No ground truth is used; it costs a second ICP.
+
     Parameters
     ----------
     source, target : eigenbases with the same k
@@ -234,6 +289,7 @@ def match_icskm(
         appended to the embedding in every nearest-neighbour step, scaled to ``feature_weight`` times the
         embedding's size: they keep the map from swapping parts that the kernels alone cannot tell apart
         (left and right limbs); kept small, the spectral embedding still decides the fine alignment
+    symmetry_restart : also run from the symmetry-flipped start and keep the lower-energy result
 
     Returns
     -------
@@ -270,7 +326,6 @@ def match_icskm(
     rows = rng.choice(source.n, min(sample, source.n), replace=False)
     weights = source.mass.diagonal()[rows]
     landmark_mass = landmark_weight * weights.mean()
-    mapping = None
     if features is not None:
         fs, ft = (np.asarray(f, dtype=np.float64).reshape(len(f), -1) for f in features)
         if fs.shape[0] != source.n or ft.shape != (target.n, fs.shape[1]):
@@ -278,23 +333,46 @@ def match_icskm(
         scale = np.sqrt(np.mean(np.vstack([fs, ft]) ** 2))
         fs, ft = fs / scale, ft / scale
 
-    def extend(points, extra, t_scale):  # the features weigh like the embedding at this scale
-        return points if features is None else np.hstack([points, extra * t_scale])
-
-    for t in times:
+    def embeddings(t):  # (source rows or all, target points) at heat scale t, features appended
         es = source.vectors * np.exp(-source.values * t / 2)
         et = target.vectors * np.exp(-target.values * t / 2)
-        size = feature_weight * np.sqrt(np.mean(np.sum(et**2, axis=1)))
-        target_points = extend(et, ft if features is not None else None, size)
-        for _ in range(iterations):
-            new = nearest_rows(extend(es[rows] @ C, fs[rows] if features is not None else None, size), target_points)
-            if mapping is not None and np.array_equal(new, mapping):
-                break
-            mapping = new
-            cross = es[rows].T @ (weights[:, None] * et[mapping]) + landmark_mass * es[p].T @ et[q]
-            U, _, Vt = np.linalg.svd(cross)
-            C = U @ Vt
-    return C, nearest_rows(extend(es @ C, fs if features is not None else None, size), target_points)
+        if features is None:
+            return es, et
+        size = feature_weight * np.sqrt(np.mean(np.sum(et**2, axis=1)))  # features weigh like the embedding
+        return (es, fs * size), np.hstack([et, ft * size])
+
+    def query(es, C, ids=slice(None)):
+        return es[ids] @ C if features is None else np.hstack([es[0][ids] @ C, es[1][ids]])
+
+    def icp(C):  # coarse-to-fine ICP from C -> (C, energy at the finest scale)
+        mapping = None
+        for t in times:
+            es, target_points = embeddings(t)
+            spectral = es if features is None else es[0]
+            for _ in range(iterations):
+                new = nearest_rows(query(es, C, rows), target_points)
+                if mapping is not None and np.array_equal(new, mapping):
+                    break
+                mapping = new
+                et = target_points[:, : target.k]
+                cross = spectral[rows].T @ (weights[:, None] * et[mapping]) + landmark_mass * spectral[p].T @ et[q]
+                U, _, Vt = np.linalg.svd(cross)
+                C = U @ Vt
+        points = query(es, C, rows)
+        nearest = nearest_rows(points, target_points)
+        landmark_residual = spectral[p] @ C - target_points[q, : target.k]
+        energy = np.sum(weights * np.sum((points - target_points[nearest]) ** 2, axis=1))
+        return C, float(energy + landmark_mass * np.sum(landmark_residual**2))
+
+    best = icp(C)
+    if symmetry_restart and source.k > 2:
+        signs, _ = intrinsic_symmetry_signs(source, count=small - 1)
+        flipped = C.copy()
+        flipped[np.argmax(signs < 0)] *= -1  # the first antisymmetric eigenfunction's sign
+        best = min(best, icp(flipped), key=lambda run: run[1])
+    C = best[0]
+    es, target_points = embeddings(times[-1])
+    return C, nearest_rows(query(es, C), target_points)
 
 
 def spectral_gradient_fields(mesh, basis: Eigenbasis, count: int = 10) -> np.ndarray:
