@@ -333,7 +333,7 @@ def match_icskm(
         scale = np.sqrt(np.mean(np.vstack([fs, ft]) ** 2))
         fs, ft = fs / scale, ft / scale
 
-    def embeddings(t):  # (source rows or all, target points) at heat scale t, features appended
+    def embeddings(t):  # (source embedding, target points) at heat scale t; with features: ((es, fs), [et ft])
         es = source.vectors * np.exp(-source.values * t / 2)
         et = target.vectors * np.exp(-target.values * t / 2)
         if features is None:
