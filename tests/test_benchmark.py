@@ -130,3 +130,20 @@ def test_summary_per_class_averages_each_class_and_the_whole():
     text = table_markdown(table)
     assert text.count("| dataset |") == 1 and text.count("| class |") == 1 and "| dog | hks | lbo | 1 |" in text
     assert "by_class" not in summarize(records[:2], "TOSCA", {"cat0": "cat"})  # one class: no breakdown
+
+
+def test_landmark_draws_are_pooled_means_of_single_draws(pose_dataset):
+    """With every vertex evaluated, two landmark draws score the mean of the two single-draw runs (draw d
+    is the single run of seed d), for the landmark method; the other methods do not depend on draws."""
+    dataset = load_folder(pose_dataset)
+    (source, _), (target, _) = dataset.load("humanoid0"), dataset.load("humanoid2")
+    identity = np.arange(source.n_vertices)
+    options = dict(k=30, methods=("hks", "icskm"), points=source.n_vertices, landmarks=1)
+    single = [evaluate_pair(source, target, identity, seed=seed, **options)["rows"] for seed in (0, 1)]
+    pooled = evaluate_pair(source, target, identity, seed=0, draws=2, **options)["rows"]
+    for i, row in enumerate(pooled):
+        for score in ("auc", "within_0.05", "mean_error"):
+            expected = (single[0][i][score] + single[1][i][score]) / 2 if row["method"] == "icskm" else single[0][i][score]
+            assert row[score] == pytest.approx(expected, rel=1e-9, abs=1e-12), (row, score)
+    with pytest.raises(HamsaError, match="at least one landmark draw"):
+        evaluate_pair(source, target, identity, draws=0, **options)

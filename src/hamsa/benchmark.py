@@ -157,15 +157,22 @@ def evaluate_pair(
     landmarks: int = 3,
     mu: float = 1.0,
     signs: str = "truth",
+    draws: int = 1,
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
     ``landmarks``: ground-truth pairs given to ``icskm`` / ``icskm_geo`` (drawn with ``seed`` among the
-    vertices that have a true image; the same for both bases). ``mu``, ``signs``: the matching potential's
-    scale and how the eigenfunction signs are resolved (see :func:`paired_bases`)."""
+    vertices that have a true image; the same for both bases). ``draws``: independent landmark draws
+    (seeds ``seed + 1``, ``seed + 2``, ...; the first is the single draw's) whose errors are pooled, so
+    the scores of the landmark methods are means over draws: with one landmark, which of two ICP minima
+    is reached depends on where the landmark falls, and one draw per pair decides little. ``mu``,
+    ``signs``: the matching potential's scale and how the eigenfunction signs are resolved (see
+    :func:`paired_bases`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
+    if int(draws) < 1:
+        raise HamsaError(f"need at least one landmark draw, got draws = {draws}")
     candidates = np.flatnonzero(truth >= 0)
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
@@ -176,14 +183,6 @@ def evaluate_pair(
         bases = paired_bases(source, target, truth, k, cache_dir, mu, signs)
     wanted = {_POTENTIAL_OF.get(method) for method in methods}
     special = {}  # potential name -> (source V, target V) of the Hamiltonians other than the paper's default
-    pairs = None
-    if "landmarks" in wanted:
-        p = np.random.default_rng(seed + 1).choice(candidates, landmarks, replace=False)
-        pairs = (p, truth[p])
-        special["landmarks"] = (  # pieces without a landmark (TOSCA's gorilla) count as farthest
-            potentials.geodesic_distance(source, p, unreachable=1.0),
-            potentials.geodesic_distance(target, truth[p], unreachable=1.0),
-        )
     if "area" in wanted:
         V_s, V_t = _area_distortion_potentials(source, target, truth)
         special["area"] = (AREA_MU * V_s, AREA_MU * V_t)
@@ -191,15 +190,26 @@ def evaluate_pair(
         special["texture"] = tuple(TEXTURE_MU * V for V in _texture_potentials(source, target, truth))
     for name, (V_s, V_t) in special.items():
         special[name] = (solve(source, V_s), solve(target, V_t))
+    runs = {None: [(None, special)]}  # landmark pairs -> the Hamiltonian bases that go with them, per draw
+    if "landmarks" in wanted:
+        runs["landmarks"] = []
+        for draw in range(int(draws)):
+            p = np.random.default_rng(seed + 1 + draw).choice(candidates, landmarks, replace=False)
+            V_s = potentials.geodesic_distance(source, p, unreachable=1.0)  # pieces without a landmark
+            V_t = potentials.geodesic_distance(target, truth[p], unreachable=1.0)  # (TOSCA's gorilla): farthest
+            runs["landmarks"].append(((p, truth[p]), {"landmarks": (solve(source, V_s), solve(target, V_t))}))
     rows, curves = [], {}
     for method in methods:
         for basis in BASES:
-            if basis == "hamiltonian" and method in _POTENTIAL_OF:
-                pair = special[_POTENTIAL_OF[method]]
-            else:
-                pair = bases[basis]
-            mapping = match_pair(method, *pair, landmarks=pairs, meshes=(source, target))
-            errors = distances.errors(mapping[chosen])
+            pooled = []
+            for pairs, hamiltonians in runs["landmarks" if _POTENTIAL_OF.get(method) == "landmarks" else None]:
+                if basis == "hamiltonian" and method in _POTENTIAL_OF:
+                    pair = hamiltonians[_POTENTIAL_OF[method]]
+                else:
+                    pair = bases[basis]
+                mapping = match_pair(method, *pair, landmarks=pairs, meshes=(source, target))
+                pooled.append(distances.errors(mapping[chosen]))
+            errors = np.concatenate(pooled)
             rows.append({"method": method, "basis": basis, **summary(errors)})
             curves.setdefault(method, {})[basis] = error_curve(errors).tolist()
     return {"rows": rows, "curves": curves}
@@ -279,6 +289,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         landmarks=settings.get("landmarks", 3),
         mu=settings.get("mu", 1.0),
         signs=settings.get("signs", "truth"),
+        draws=settings.get("draws", 1),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     with atomic_write(path, "w") as handle:
@@ -326,6 +337,7 @@ def benchmark_dataset(
     landmarks: int = 3,
     mu: float = 1.0,
     signs: str = "truth",
+    draws: int = 1,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -343,6 +355,7 @@ def benchmark_dataset(
         to run the pairs on a cluster instead (needs ``dask.distributed``)
     limit : at most this many pairs per class
     landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
+    draws : independent landmark draws per pair, pooled (:func:`evaluate_pair`)
     mu, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
     """
     unknown = set(methods) - set(METHODS)
@@ -353,6 +366,8 @@ def benchmark_dataset(
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
     if {"icskm", "icskm_geo"} & set(methods):
         settings["landmarks"] = int(landmarks)
+        if draws != 1:  # (one draw stays out of the key: earlier results remain valid)
+            settings["draws"] = int(draws)
     if mu != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
         settings.update(mu=float(mu), signs=signs)
     key = _settings_key(settings)

@@ -186,6 +186,12 @@ def _parser() -> argparse.ArgumentParser:
         help="icskm, icskm_geo: ground-truth landmark pairs per pair (default 3)",
     )
     bench.add_argument(
+        "--draws",
+        type=_positive_int,
+        default=1,
+        help="icskm, icskm_geo: independent random landmark draws per pair, errors pooled (default 1)",
+    )
+    bench.add_argument(
         "--mu",
         type=float,
         default=1.0,
@@ -514,6 +520,7 @@ def _benchmark_matching(args) -> None:
         landmarks=args.landmarks,
         mu=args.mu,
         signs=args.signs,
+        draws=args.draws,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")
