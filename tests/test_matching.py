@@ -95,14 +95,16 @@ def test_icskm_recovers_an_isometry_from_one_landmark(pair):
         match_icskm(source, target.truncate(20), [0], [0])
     with pytest.raises(HamsaError, match="features"):
         match_icskm(source, target, [0], [0], features=(np.zeros((flat.n_vertices, 2)), np.zeros((5, 2))))
+    with pytest.raises(HamsaError, match="restarts"):
+        match_icskm(source, target, [0], [0], restarts=-1)
 
 
 @pytest.mark.data
 def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark():
     """NOTES T14 (ICSKM): three ground-truth landmarks put ICSKM below 0.05 mean error on a SCAPE pair with
-    either basis; from a single landmark the paper's LBO version (no symmetry restart) flips left and right
-    while the Hamiltonian with V = geodesic distance from the landmark does not; with the restart (from the
-    first antisymmetric eigenfunction flipped, lower ICP energy kept) the LBO version does not flip either."""
+    either basis; from a single landmark the paper's LBO version (one ICP run, no restarts) flips left and
+    right while the Hamiltonian with V = geodesic distance from the landmark does not; with the sign-flipped
+    restarts (lowest ICP energy kept) the LBO version does not flip either."""
     from hamsa import potentials
     from hamsa.evaluation import sample_points
 
@@ -123,13 +125,42 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
                 V = [potentials.geodesic_distance(mesh, landmarks) for mesh in (source, target)]
             bases = hamsa.eigenbasis(source, 50, V[0]), hamsa.eigenbasis(target, 50, V[1])
             for restart in (True, False) if basis == "lbo" and expected != "both" else (True,):
-                _, mapping = match_icskm(*bases, landmarks, landmarks, symmetry_restart=restart)
+                _, mapping = match_icskm(*bases, landmarks, landmarks, restarts=5 if restart else 0)
                 errors[basis, restart] = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
         # measured: mesh001, 3 landmarks: LBO 0.018, H 0.018; mesh030, 1 landmark: LBO without the restart 0.49,
         # with it 0.018 (since 0.1.3: the symmetry pattern per displacement), H 0.018
         assert errors["hamiltonian", True] < 0.05 and errors["lbo", True] < 0.05, errors
         if expected != "both":
             assert errors["lbo", False] > 0.2, errors
+
+
+@pytest.mark.data
+def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur():
+    """TOSCA centaur0 -> centaur1 from one landmark (vertex 7461, near the symmetry plane), Hamiltonian basis
+    (V = geodesic distance from it): the landmark fit has psi_5's sign wrong. Restarting only from psi_1 and
+    the first antisymmetric function flipped (psi_4) ends in a partial mirror whose ICP energy is lower than
+    the unflipped run's; with psi_1..psi_5 each flipped in turn the psi_5 start reaches the lowest energy of
+    all and the right map."""
+    from hamsa import potentials
+    from hamsa.datasets import load_tosca
+    from hamsa.evaluation import sample_points
+
+    from conftest import DATA
+
+    def unit(mesh):
+        return hamsa.TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)
+
+    tosca = load_tosca(DATA / "tosca_hires")
+    source, target = (unit(tosca.load(name)[0]) for name in ("centaur0", "centaur1"))
+    landmark = np.array([7461])  # same vertex ids within a class: the true map is the identity
+    bases = [hamsa.eigenbasis(m, 100, potentials.geodesic_distance(m, landmark)) for m in (source, target)]
+    points = sample_points(source.n_vertices, 1000)
+    errors = {}
+    for restarts in (1, 5):
+        _, mapping = match_icskm(*bases, landmark, landmark, restarts=restarts)
+        errors[restarts] = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
+    # measured: 1 restart 0.101 (partial mirror), 5 restarts 0.016
+    assert errors[5] < 0.03 and errors[1] > 0.05, errors
 
 
 @pytest.mark.data
