@@ -97,6 +97,8 @@ def test_icskm_recovers_an_isometry_from_one_landmark(pair):
         match_icskm(source, target, [0], [0], features=(np.zeros((flat.n_vertices, 2)), np.zeros((5, 2))))
     with pytest.raises(HamsaError, match="restarts"):
         match_icskm(source, target, [0], [0], restarts=-1)
+    with pytest.raises(HamsaError, match="one ICP iteration"):
+        match_icskm(source, target, [0], [0], iterations=0)
 
 
 @pytest.mark.data
@@ -338,15 +340,17 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
     assert summary(geodesic_errors(target, mapping[points], points))["mean_error"] < 0.05  # measured 0.038
 
 
-@pytest.mark.parametrize("dimension", [3, 20, 40])  # k-d tree, k-d tree, matrix products
-def test_nearest_rows_equals_a_kd_tree(dimension):
-    from scipy.spatial import cKDTree
+@pytest.mark.parametrize("dimension", [3, 20, 100])
+def test_nearest_rows_equals_a_distance_scan(dimension):
+    from scipy.spatial.distance import cdist
 
     from hamsa.matching import nearest_rows
 
     rng = np.random.default_rng(dimension)
     points, queries = rng.standard_normal((700, dimension)), rng.standard_normal((3000, dimension))
-    np.testing.assert_array_equal(nearest_rows(queries, points, chunk=512), cKDTree(points).query(queries)[1])
+    np.testing.assert_array_equal(nearest_rows(queries, points), cdist(queries, points).argmin(axis=1))
+    with pytest.raises(HamsaError, match="same d"):
+        nearest_rows(queries, points[:, :-1] if dimension > 1 else points[:, None])
 
 
 def test_cli_match_refuses_bad_landmarks(tmp_path, pair, capsys):
