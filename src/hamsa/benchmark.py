@@ -11,7 +11,7 @@ its largest connected component first, as in Kim et al.'s benchmark, whose goril
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
 * ``icskm``: iterative closest spectral kernel maps (Shtern & Kimmel 2014) from ``landmarks`` ground-truth
   pairs drawn at random (seeded), as in the paper; its Hamiltonian is the paper's landmark potential,
-  V = geodesic distance from the nearest landmark (normalized to [0, 1]) on each shape;
+  V = ``landmark_mu`` x geodesic distance from the nearest landmark (normalized to [0, 1]) on each shape;
 * ``icskm_geo``: the same with the geodesic distances from each landmark as extra coordinates of the
   embedding (both bases) — hamsa's best pipeline on SCAPE, not one of the paper's;
 * ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
@@ -158,6 +158,7 @@ def evaluate_pair(
     mu: float = 1.0,
     signs: str = "truth",
     draws: int = 1,
+    landmark_mu: float = 1.0,
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
@@ -167,12 +168,17 @@ def evaluate_pair(
     the scores of the landmark methods are means over draws: with one landmark, which of two ICP minima
     is reached depends on where the landmark falls, and one draw per pair decides little. ``mu``,
     ``signs``: the matching potential's scale and how the eigenfunction signs are resolved (see
-    :func:`paired_bases`)."""
+    :func:`paired_bases`). ``landmark_mu``: the scale of the landmark potential (geodesic distance in [0, 1]
+    on a unit-area shape, whose Laplacian eigenvalues run from about 5 to about 1200 at k = 100 on SCAPE,
+    so that mu = 1 barely moves the basis and mu = 10-100 starts to localize the low functions near the
+    landmarks)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
     if int(draws) < 1:
         raise HamsaError(f"need at least one landmark draw, got draws = {draws}")
+    if not (np.isfinite(landmark_mu) and landmark_mu > 0):
+        raise HamsaError(f"landmark_mu must be a positive number, got {landmark_mu}")
     candidates = np.flatnonzero(truth >= 0)
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
@@ -195,8 +201,8 @@ def evaluate_pair(
         runs["landmarks"] = []
         for draw in range(int(draws)):
             p = np.random.default_rng(seed + 1 + draw).choice(candidates, landmarks, replace=False)
-            V_s = potentials.geodesic_distance(source, p, unreachable=1.0)  # pieces without a landmark
-            V_t = potentials.geodesic_distance(target, truth[p], unreachable=1.0)  # (TOSCA's gorilla): farthest
+            V_s = landmark_mu * potentials.geodesic_distance(source, p, unreachable=1.0)  # pieces without a
+            V_t = landmark_mu * potentials.geodesic_distance(target, truth[p], unreachable=1.0)  # landmark: farthest
             runs["landmarks"].append(((p, truth[p]), {"landmarks": (solve(source, V_s), solve(target, V_t))}))
     rows, curves = [], {}
     for method in methods:
@@ -290,6 +296,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         mu=settings.get("mu", 1.0),
         signs=settings.get("signs", "truth"),
         draws=settings.get("draws", 1),
+        landmark_mu=settings.get("landmark_mu", 1.0),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     with atomic_write(path, "w") as handle:
@@ -338,6 +345,7 @@ def benchmark_dataset(
     mu: float = 1.0,
     signs: str = "truth",
     draws: int = 1,
+    landmark_mu: float = 1.0,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -356,6 +364,7 @@ def benchmark_dataset(
     limit : at most this many pairs per class
     landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
     draws : independent landmark draws per pair, pooled (:func:`evaluate_pair`)
+    landmark_mu : scale of the icskm / icskm_geo Hamiltonian's landmark potential (:func:`evaluate_pair`)
     mu, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
     """
     unknown = set(methods) - set(METHODS)
@@ -368,6 +377,8 @@ def benchmark_dataset(
         settings["landmarks"] = int(landmarks)
         if draws != 1:  # (one draw stays out of the key: earlier results remain valid)
             settings["draws"] = int(draws)
+        if landmark_mu != 1.0:  # (likewise)
+            settings["landmark_mu"] = float(landmark_mu)
     if mu != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
         settings.update(mu=float(mu), signs=signs)
     key = _settings_key(settings)

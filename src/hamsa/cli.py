@@ -192,6 +192,13 @@ def _parser() -> argparse.ArgumentParser:
         help="icskm, icskm_geo: independent random landmark draws per pair, errors pooled (default 1)",
     )
     bench.add_argument(
+        "--landmark-mu",
+        type=float,
+        default=1.0,
+        help="icskm, icskm_geo: scale of the Hamiltonian's landmark potential, mu x geodesic distance from the "
+        "landmarks in [0, 1] on the unit-area shape (default 1)",
+    )
+    bench.add_argument(
         "--mu",
         type=float,
         default=1.0,
@@ -521,6 +528,7 @@ def _benchmark_matching(args) -> None:
         mu=args.mu,
         signs=args.signs,
         draws=args.draws,
+        landmark_mu=args.landmark_mu,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")
