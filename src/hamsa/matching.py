@@ -294,7 +294,7 @@ def match_icskm(
     with one landmark the flip that wins was psi_2, psi_4 or psi_5 depending on the shape and the landmark,
     and the lowest energy picked the right start where we checked (centaur: 0.017 vs 0.033 for the partial
     mirror, michael: 0.0012 vs 0.0066); with three landmarks on david0 -> 1 it picked a worse map (AUC 0.68
-    against 0.78 without restarts, either basis).
+    against 0.78 with the single symmetry restart of 0.1.3, either basis).
 
     Parameters
     ----------
