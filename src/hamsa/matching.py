@@ -19,9 +19,8 @@ from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.mesh import as_trimesh
 
-# ICSKM's restarts are ranked by their energy on a third of the ICP sample; those within this factor of the
-# lowest are run on the whole sample, which decides (david0 -> 1, three landmarks: a start 1.25x below the
-# right one on the third ended 8% above it on the whole sample, AUC 0.68 against 0.78)
+# ICSKM's restarts within this factor of the lowest energy on a third of the ICP sample are decided on the
+# whole sample (see match_icskm)
 NEAR_TIE = 1.5
 
 
@@ -413,18 +412,16 @@ def match_icskm(
             visited.update(dict.fromkeys(trail, result))
         return result
 
+    starts = [C]
     if restarts and source.k > 2:
         signs, _ = intrinsic_symmetry_signs(source, count=small - 1)
         flips = {*range(1, min(int(restarts), small - 1) + 1), int(np.argmax(signs < 0))}
-        starts = [C] + [C * np.where(np.arange(source.k) == j, -1.0, 1.0)[:, None] for j in sorted(flips)]
+        starts += [C * np.where(np.arange(source.k) == j, -1.0, 1.0)[:, None] for j in sorted(flips)]
         explored, visited = sampled[: max(len(sampled) // 3, 1)], {}
         ranked = {}  # energy on the explored third -> the first start that ended there
         for start in starts:
             ranked.setdefault(icp(start, explored, visited)[1], start)
-        # a third of the sample ranks the starts; the near ties are decided on the whole sample
         starts = [start for energy, start in ranked.items() if energy <= NEAR_TIE * min(ranked)]
-    else:
-        starts = [C]
     finished = {}
     C, _ = min((icp(start, sampled, finished) for start in starts), key=lambda run: run[1])
     es, target_points = embeddings(times[-1])
