@@ -33,6 +33,11 @@ def pair():
     return flat, rolled
 
 
+def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:
+    """The mesh centred and scaled to unit area (as the matching benchmark does)."""
+    return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
+
+
 def test_functional_map_of_an_isometry_is_nearly_diagonal_and_recovers_the_map(pair):
     flat, rolled = pair
     k = 20
@@ -112,13 +117,10 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
 
     from conftest import data_mesh
 
-    def unit(mesh):
-        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-    source = unit(data_mesh("scape/meshes/mesh000.off.gz"))
+    source = unit_area(data_mesh("scape/meshes/mesh000.off.gz"))
     points = sample_points(source.n_vertices, 1000)
     for name, count, expected in (("mesh001", 3, "both"), ("mesh030", 1, "hamiltonian")):
-        target = unit(data_mesh(f"scape/meshes/{name}.off.gz"))
+        target = unit_area(data_mesh(f"scape/meshes/{name}.off.gz"))
         landmarks = np.random.default_rng(1).choice(source.n_vertices, count, replace=False)
         errors = {}
         for basis in ("lbo", "hamiltonian"):
@@ -178,8 +180,7 @@ def test_icskm_restarts_that_nearly_tie_on_a_third_of_the_sample_are_decided_on_
 
     tosca = load_tosca(DATA / "tosca_hires")
     source, target = (tosca.load(name)[0] for name in ("david0", "david1"))
-    source, target = (hamsa.TriMesh((m.vertices - m.vertices.mean(axis=0)) / np.sqrt(m.area), m.faces)
-                      for m in (source, target))  # fmt: skip
+    source, target = unit_area(source), unit_area(target)
     landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)  # identity ground truth
     _, mapping = match_icskm(hamsa.eigenbasis(source, 100), hamsa.eigenbasis(target, 100), landmarks, landmarks)
     points = sample_points(source.n_vertices, 1000)
@@ -197,10 +198,10 @@ def test_landmark_distances_as_icskm_features_stop_a_limb_swap_on_scape():
 
     from conftest import data_mesh
 
-    def unit(mesh):
-        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-    source, target = unit(data_mesh("scape/meshes/mesh000.off.gz")), unit(data_mesh("scape/meshes/mesh006.off.gz"))
+    source, target = (
+        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
+        unit_area(data_mesh("scape/meshes/mesh006.off.gz")),
+    )
     landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)
     meshes = (source, target)
     bases = [hamsa.eigenbasis(m, 100, potentials.geodesic_distance(m, landmarks)) for m in meshes]
@@ -252,10 +253,10 @@ def test_sgfe_with_the_area_distortion_potential_beats_the_lbo_on_scape():
 
     from conftest import data_mesh
 
-    def unit(mesh):
-        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-    source, target = unit(data_mesh("scape/meshes/mesh000.off.gz")), unit(data_mesh("scape/meshes/mesh002.off.gz"))
+    source, target = (
+        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
+        unit_area(data_mesh("scape/meshes/mesh002.off.gz")),
+    )
     V_s, V_t = potentials.area_distortion(source, target), potentials.area_distortion(target, source)
     points = sample_points(source.n_vertices, 1000)
     errors = {}
@@ -292,11 +293,8 @@ def test_hamiltonian_hks_beats_lbo_hks_on_a_scape_pair():
 
     from conftest import data_mesh
 
-    def unit(mesh):
-        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-    source = unit(data_mesh("scape/meshes/mesh000.off.gz"))
-    target = unit(data_mesh("scape/meshes/mesh005.off.gz"))
+    source = unit_area(data_mesh("scape/meshes/mesh000.off.gz"))
+    target = unit_area(data_mesh("scape/meshes/mesh005.off.gz"))
     lbo_s, lbo_t = hamsa.eigenbasis(source, 100), hamsa.eigenbasis(target, 100)
     times = default_hks_times(lbo_s, 50)
     points = sample_points(source.n_vertices, 1000)
@@ -340,10 +338,10 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
 
     from conftest import DATA, data_mesh
 
-    def unit(mesh):
-        return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-    source, target = unit(data_mesh("scape/meshes/mesh000.off.gz")), unit(data_mesh("scape/meshes/mesh020.off.gz"))
+    source, target = (
+        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
+        unit_area(data_mesh("scape/meshes/mesh020.off.gz")),
+    )
     landmarks = np.random.default_rng(0).choice(
         np.loadtxt(DATA / "scape" / "kim_landmarks" / "scape.pid", dtype=np.int64, ndmin=2)[:, 0], 3, replace=False
     )
