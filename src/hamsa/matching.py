@@ -263,7 +263,7 @@ def match_icskm(
     source_landmarks,
     target_landmarks,
     *,
-    scales: int = 6,
+    scales: int | tuple[int, ...] = (6, 10),
     iterations: int = 10,
     landmark_weight: float = 10.0,
     sample: int = 3000,
@@ -292,21 +292,29 @@ def match_icskm(
     (and the sign of the first eigenfunction that the source's intrinsic symmetry reverses,
     :func:`intrinsic_symmetry_signs`, when it is later), and the start whose ICP ends with the lowest energy
     at the finest scale (nearest-neighbour distances plus the landmark term, the quantity ICP minimizes) is
-    run again in full. The starts are compared on a third of the ICP sample, and a start that reaches a
-    state an earlier one passed through (same scale, same map) stops there with that start's result, so
-    the up to seven starts cost at most about as much as three full ICPs; the starts whose energy on the
-    third is within :data:`NEAR_TIE` of the lowest are all run on the whole sample, where the lowest
-    energy wins. No ground truth is used. On TOSCA with one landmark the flip that wins was psi_2, psi_4
-    or psi_5 depending on the shape and the landmark, and the lowest energy picked the right start where
-    we checked (centaur: 0.017 vs 0.033 for the partial mirror, michael: 0.0012 vs 0.0066); on david0 -> 1
-    with three landmarks the third alone picked a worse map (the psi_2 flip, 0.0037 vs 0.0047 on the
-    third, 0.0152 vs 0.0140 on the whole sample: AUC 0.68 against 0.78).
+    run again in full. Each start runs through every schedule of ``scales`` (the step from coarse to fine
+    decides which minimum ICP follows, see ``scales``). The runs are compared on a third of the ICP sample,
+    and a run that reaches a state an earlier one passed through (same schedule, same scale, same map) stops
+    there with that run's result; the runs whose energy on the third is within :data:`NEAR_TIE` of the
+    lowest are all run on the whole sample, where the lowest energy wins. No ground truth is used. On TOSCA
+    with one landmark the flip that wins was psi_2, psi_4 or psi_5 depending on the shape and the landmark,
+    and the lowest energy picked the right start where we checked (centaur: 0.017 vs 0.033 for the partial
+    mirror, michael: 0.0012 vs 0.0066); on david0 -> 1 with three landmarks the third alone picked a worse
+    map (the psi_2 flip, 0.0037 vs 0.0047 on the third, 0.0152 vs 0.0140 on the whole sample: AUC 0.68
+    against 0.78).
 
     Parameters
     ----------
     source, target : eigenbases with the same k
     source_landmarks, target_landmarks : (L,) vertex ids, L >= 1, matched in order
-    scales : heat scales, geometric in [4 ln10 / E_k, 4 ln10 / E_6]
+    scales : heat scales of a coarse-to-fine schedule, geometric in [4 ln10 / E_k, 4 ln10 / E_6]; a tuple
+        gives several schedules, each run from every start, and the lowest finest-scale energy decides among
+        all of them (the schedules share the finest scale). Which minimum ICP follows depends on the step: on
+        SCAPE mesh000 -> 013 from one landmark (Hamiltonian basis) the right map has the lower finest-scale
+        energy (0.0208 against 0.0251) yet six scales (t shrinking ~2.2x per step at k = 100) end in a limb
+        swap from every start, even from the right C, while ten do not; on mesh000 -> 004 it is the other
+        way round (ten: 0.030, a swap; six: 0.024, right). The energy picked the right schedule in every case
+        we checked, so the default runs both, (6, 10)
     iterations : ICP iterations per scale at most (stops when the sampled map no longer changes)
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
     features : optional ((n_s, f), (n_t, f)) intrinsic functions that correspond on the two shapes (e.g. the
@@ -314,7 +322,8 @@ def match_icskm(
         appended to the embedding in every nearest-neighbour step, scaled to ``feature_weight`` times the
         embedding's size: they keep the map from swapping parts that the kernels alone cannot tell apart
         (left and right limbs); kept small, the spectral embedding still decides the fine alignment
-    restarts : sign-flipped starts tried (0: the paper's single ICSKM run from the landmark fit)
+    restarts : sign-flipped starts tried (0 with a single schedule, e.g. ``scales=6``: the paper's single
+        ICSKM run from the landmark fit)
 
     Returns
     -------
@@ -332,13 +341,15 @@ def match_icskm(
         raise HamsaError("a landmark is not a vertex id of its shape")
     if int(restarts) < 0:
         raise HamsaError(f"restarts must be >= 0, got {restarts}")
-    if int(iterations) < 1 or int(scales) < 1:
+    counts = sorted({int(count) for count in np.atleast_1d(scales)})
+    if int(iterations) < 1 or counts[0] < 1:
         raise HamsaError(f"need at least one scale and one ICP iteration, got {scales} and {iterations}")
     # coarse to fine: from the scale where about the first five eigenfunctions count (not the ground
     # state's: a Hamiltonian's E_1 can be near 0 and a scale set by it keeps psi_1 alone, collapsing the map)
-    # to the one where all k do
+    # to the one where all k do; every schedule ends at the same finest scale, so their energies compare
     spectrum = np.abs(source.values)
-    times = np.geomspace(4 * np.log(10) / spectrum[-1], 4 * np.log(10) / spectrum[min(5, source.k - 1)], scales)[::-1]
+    finest, coarsest = 4 * np.log(10) / spectrum[-1], 4 * np.log(10) / spectrum[min(5, source.k - 1)]
+    schedules = [np.geomspace(finest, coarsest, count)[::-1] for count in counts]
     # initial C on a small basis from landmark heat kernels and the HKS (intrinsic: no sign ambiguity)
     small = min(20, source.k)
     s0, t0 = source.truncate(small), target.truncate(small)
@@ -378,10 +389,11 @@ def match_icskm(
     def query(es, C, ids=slice(None)):
         return es[ids] @ C if features is None else np.hstack([es[0][ids] @ C, es[1][ids]])
 
-    def icp(C, rows, visited=None):  # coarse-to-fine ICP from C on the source vertices rows -> (C, energy
-        # at the finest scale). visited: {state after a scale: result} of earlier runs on the same rows; the
-        # state (scale, scale at which C was last fitted, map) decides the rest of the run (C is the
-        # Procrustes fit of that map at that scale), so a run that reaches a visited state ends there
+    def icp(C, times, rows, visited=None):  # coarse-to-fine ICP from C over the heat scales times on the source
+        # vertices rows -> (C, energy at the finest scale). visited: {state after a scale: result} of earlier
+        # runs on the same rows; the state (schedule, scale, scale at which C was last fitted, map) decides the
+        # rest of the run (C is the Procrustes fit of that map at that scale), so a run that reaches a visited
+        # state ends there
         weights = source.mass.diagonal()[rows]
         landmark_mass = landmark_weight * weights.mean()
         mapping, fitted, trail = None, None, []
@@ -400,7 +412,7 @@ def match_icskm(
                 U, _, Vt = np.linalg.svd(cross)
                 C = U @ Vt
             if visited is not None:
-                trail.append((scale, fitted, mapping.tobytes()))
+                trail.append((len(times), scale, fitted, mapping.tobytes()))
                 if trail[-1] in visited:
                     return visited[trail[-1]]
         points = query(es, C, rows)
@@ -417,14 +429,16 @@ def match_icskm(
         signs, _ = intrinsic_symmetry_signs(source, count=small - 1)
         flips = {*range(1, min(int(restarts), small - 1) + 1), int(np.argmax(signs < 0))}
         starts += [C * np.where(np.arange(source.k) == j, -1.0, 1.0)[:, None] for j in sorted(flips)]
+    runs = [(start, times) for times in schedules for start in starts]
+    if len(runs) > 1:
         explored, visited = sampled[: max(len(sampled) // 3, 1)], {}
-        ranked = {}  # energy on the explored third -> the first start that ended there
-        for start in starts:
-            ranked.setdefault(icp(start, explored, visited)[1], start)
-        starts = [start for energy, start in ranked.items() if energy <= NEAR_TIE * min(ranked)]
+        ranked = {}  # energy on the explored third -> the first run that ended there
+        for run in runs:
+            ranked.setdefault(icp(*run, explored, visited)[1], run)
+        runs = [run for energy, run in ranked.items() if energy <= NEAR_TIE * min(ranked)]
     finished = {}
-    C, _ = min((icp(start, sampled, finished) for start in starts), key=lambda run: run[1])
-    es, target_points = embeddings(times[-1])
+    C, _ = min((icp(*run, sampled, finished) for run in runs), key=lambda result: result[1])
+    es, target_points = embeddings(finest)
     return C, nearest_rows(query(es, C), target_points)
 
 
