@@ -257,13 +257,33 @@ def intrinsic_symmetry_signs(
     return np.concatenate([[1.0], best[2]]), best[1]
 
 
+def _heat_schedules(scales) -> list[tuple[int, int]]:
+    """``match_icskm``'s ``scales`` (an int n, a pair (n, j), or a tuple of these) as sorted distinct
+    (number of scales, index j of the eigenvalue that sets the coarsest scale) pairs; int n means (n, 5)."""
+    items = [scales] if isinstance(scales, (int, np.integer)) else list(scales)
+    plans = set()
+    for item in items:
+        if isinstance(item, (int, np.integer)):
+            n, j = int(item), 5
+        elif np.ndim(item) == 1 and len(item) == 2:
+            n, j = (int(value) for value in item)
+        else:
+            raise HamsaError(f"a heat schedule is an int n or a pair (n, j), got {item!r}")
+        if n < 1 or j < 1:
+            raise HamsaError(f"a heat schedule needs at least one scale from E_j with j >= 1, got {item!r}")
+        plans.add((n, j))
+    if not plans:
+        raise HamsaError("need at least one heat schedule, got none")
+    return sorted(plans)
+
+
 def match_icskm(
     source: Eigenbasis,
     target: Eigenbasis,
     source_landmarks,
     target_landmarks,
     *,
-    scales: int | tuple[int, ...] = (6, 10),
+    scales: int | tuple = (6, 10, (6, 20)),
     iterations: int = 10,
     landmark_weight: float = 10.0,
     sample: int = 3000,
@@ -285,36 +305,40 @@ def match_icskm(
     V = geodesic distance from the landmarks, :func:`hamsa.potentials.geodesic_distance`).
 
     A sign of the initial C that the landmarks cannot decide (on a symmetric shape, the first antisymmetric
-    eigenfunction's when a landmark lies near the symmetry plane; with a Hamiltonian basis, whichever low
-    eigenfunction the potential leaves nearly symmetric) stays through the whole schedule as a partial
-    left-right flip: the coarse scales cannot tell the map from its mirror image. So ICSKM is started
-    ``restarts`` more times, each time from the initial C with one of psi_1..psi_restarts's signs flipped
-    (and the sign of the first eigenfunction that the source's intrinsic symmetry reverses,
-    :func:`intrinsic_symmetry_signs`, when it is later), and the start whose ICP ends with the lowest energy
-    at the finest scale (nearest-neighbour distances plus the landmark term, the quantity ICP minimizes) is
-    run again in full. Each start runs through every schedule of ``scales`` (the step from coarse to fine
-    decides which minimum ICP follows, see ``scales``). The runs are compared on a third of the ICP sample,
-    and a run that reaches a state an earlier one passed through (same schedule, same scale, same map) stops
-    there with that run's result; the runs whose energy on the third is within :data:`NEAR_TIE` of the
-    lowest are all run on the whole sample, where the lowest energy wins. No ground truth is used. On TOSCA
-    with one landmark the flip that wins was psi_2, psi_4 or psi_5 depending on the shape and the landmark,
-    and the lowest energy picked the right start where we checked (centaur: 0.017 vs 0.033 for the partial
-    mirror, michael: 0.0012 vs 0.0066); on david0 -> 1 with three landmarks the third alone picked a worse
-    map (the psi_2 flip, 0.0037 vs 0.0047 on the third, 0.0152 vs 0.0140 on the whole sample: AUC 0.68
-    against 0.78).
+    eigenfunction's when a landmark lies near the symmetry plane; with a Hamiltonian basis, whichever low eigenfunction
+    the potential leaves nearly symmetric) stays through the whole schedule as a partial left-right flip: the coarse
+    scales cannot tell the map from its mirror image. So ICSKM is started ``restarts`` more times, each time from the
+    initial C with one of psi_1..psi_restarts's signs flipped (and the sign of the first eigenfunction that the source's
+    intrinsic symmetry reverses, :func:`intrinsic_symmetry_signs`, when it is later), and the start whose ICP ends with
+    the lowest energy at the finest scale (nearest-neighbour distances plus the landmark term, the quantity ICP
+    minimizes) is run again in full. Each start runs through every schedule of ``scales`` (where ICP starts and how far
+    it steps from coarse to fine decide which minimum it follows, see ``scales``). The runs are compared on a third of
+    the ICP sample, and a run that reaches a state an earlier one passed through (same schedule, same scale, same map)
+    stops there with that run's result; the runs whose energy on the third is within :data:`NEAR_TIE` of the lowest are
+    all run on the whole sample, where the lowest energy wins. No ground truth is used. On TOSCA with one landmark the
+    flip that wins was psi_2, psi_4 or psi_5 depending on the shape and the landmark, and the lowest energy picked the
+    right start where we checked (centaur: 0.017 vs 0.033 for the partial mirror, michael: 0.0012 vs 0.0066); on david0
+    -> 1 with three landmarks the third alone picked a worse map (the psi_2 flip, 0.0037 vs 0.0047 on the third, 0.0152
+    vs 0.0140 on the whole sample: AUC 0.68 against 0.78).
 
     Parameters
     ----------
     source, target : eigenbases with the same k
     source_landmarks, target_landmarks : (L,) vertex ids, L >= 1, matched in order
-    scales : heat scales of a coarse-to-fine schedule, geometric in [4 ln10 / E_k, 4 ln10 / E_6]; a tuple
-        gives several schedules, each run from every start, and the lowest finest-scale energy decides among
-        all of them (the schedules share the finest scale). Which minimum ICP follows depends on the step: on
-        SCAPE mesh000 -> 013 from one landmark (Hamiltonian basis) the right map has the lower finest-scale
-        energy (0.0208 against 0.0251) yet six scales (t shrinking ~2.2x per step at k = 100) end in a limb
-        swap from every start, even from the right C, while ten do not; on mesh000 -> 004 it is the other
-        way round (ten: 0.030, a swap; six: 0.024, right). The energy picked the right schedule in every case
-        we checked, so the default runs both, (6, 10)
+    scales : coarse-to-fine schedules of heat scales. An int n: n scales, geometric from 4 ln10 / E_5 down to 4 ln10 /
+        E_{k-1} (eigenvalues E_0 <= E_1 <= ... of the source basis, counted from 0); a pair (n, j) in a tuple: n scales
+        from 4 ln10 / E_j, where about the first j eigenfunctions count, down to the same finest scale (a tuple of ints
+        is several schedules from E_5); a tuple of these: several schedules, each run from every start, the lowest
+        finest-scale energy deciding among all of them (the schedules share the finest scale, so their energies
+        compare). Which minimum ICP follows depends on where it starts and on the step. On SCAPE mesh000 -> 013 from one
+        landmark (Hamiltonian basis) the right map has the lower finest-scale energy (0.0208 against 0.0251) yet six
+        scales (t shrinking ~2.2x per step at k = 100) end in a limb swap from every start, even from the right C, while
+        ten do not; on mesh000 -> 004 it is the other way round (ten: 0.030, a swap; six: 0.024, right). On mesh000 ->
+        006, 008, 019, 025, 039, 041 both end in a limb swap, even started from the ground truth's C: at 4 ln10 / E_5
+        the five functions that count cannot hold the limbs apart, while six scales from 4 ln10 / E_20 (the size of the
+        landmark fit) find the right map, at lower energy (mesh006: 0.0228 against 0.0302, AUC 0.92 against 0.66). Where
+        the other schedules were right it ties them in energy and costs up to 0.01 AUC (mesh001, 004, 013). The energy
+        picked the better map wherever the right one was among the runs, so the default runs all three, (6, 10, (6, 20))
     iterations : ICP iterations per scale at most (stops when the sampled map no longer changes)
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
     features : optional ((n_s, f), (n_t, f)) intrinsic functions that correspond on the two shapes (e.g. the
@@ -341,15 +365,15 @@ def match_icskm(
         raise HamsaError("a landmark is not a vertex id of its shape")
     if int(restarts) < 0:
         raise HamsaError(f"restarts must be >= 0, got {restarts}")
-    counts = sorted({int(count) for count in np.atleast_1d(scales)})
-    if int(iterations) < 1 or counts[0] < 1:
-        raise HamsaError(f"need at least one scale and one ICP iteration, got {scales} and {iterations}")
-    # coarse to fine: from the scale where about the first five eigenfunctions count (not the ground
+    plans = _heat_schedules(scales)
+    if int(iterations) < 1:
+        raise HamsaError(f"need at least one ICP iteration, got {iterations}")
+    # coarse to fine: from the scale where about the first j eigenfunctions count (j >= 5, not the ground
     # state's: a Hamiltonian's E_1 can be near 0 and a scale set by it keeps psi_1 alone, collapsing the map)
     # to the one where all k do; every schedule ends at the same finest scale, so their energies compare
     spectrum = np.abs(source.values)
-    finest, coarsest = 4 * np.log(10) / spectrum[-1], 4 * np.log(10) / spectrum[min(5, source.k - 1)]
-    schedules = [np.geomspace(finest, coarsest, count)[::-1] for count in counts]
+    finest = 4 * np.log(10) / spectrum[-1]
+    schedules = [np.geomspace(finest, 4 * np.log(10) / spectrum[min(j, source.k - 1)], n)[::-1] for n, j in plans]
     # initial C on a small basis from landmark heat kernels and the HKS (intrinsic: no sign ambiguity)
     small = min(20, source.k)
     s0, t0 = source.truncate(small), target.truncate(small)
@@ -412,7 +436,7 @@ def match_icskm(
                 U, _, Vt = np.linalg.svd(cross)
                 C = U @ Vt
             if visited is not None:
-                trail.append((len(times), scale, fitted, mapping.tobytes()))
+                trail.append((times[0], len(times), scale, fitted, mapping.tobytes()))
                 if trail[-1] in visited:
                     return visited[trail[-1]]
         points = query(es, C, rows)
