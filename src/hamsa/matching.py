@@ -334,11 +334,12 @@ def match_icskm(
         landmark (Hamiltonian basis) the right map has the lower finest-scale energy (0.0208 against 0.0251) yet six
         scales (t shrinking ~2.2x per step at k = 100) end in a limb swap from every start, even from the right C, while
         ten do not; on mesh000 -> 004 it is the other way round (ten: 0.030, a swap; six: 0.024, right). On mesh000 ->
-        006, 008, 019, 025, 039, 041 both end in a limb swap, even started from the ground truth's C: at 4 ln10 / E_5
-        the five functions that count cannot hold the limbs apart, while six scales from 4 ln10 / E_20 (the size of the
-        landmark fit) find the right map, at lower energy (mesh006: 0.0228 against 0.0302, AUC 0.92 against 0.66). Where
-        the other schedules were right it ties them in energy and costs up to 0.01 AUC (mesh001, 004, 013). The energy
-        picked the better map wherever the right one was among the runs, so the default runs all three, (6, 10, (6, 20))
+        006, 008, 019, 025, 027, 029, 039, 041 (LBO basis) both end in a limb swap (on mesh039 even when started from
+        the ground truth's C: at 4 ln10 / E_5 the five functions that count cannot hold the limbs apart), while six
+        scales from 4 ln10 / E_20 (the size of the landmark fit) find the right map, at lower energy (mesh006: 0.0228
+        against 0.0302, AUC 0.92 against 0.66; not on 021, 024, 032). Where the other schedules were right it ties them
+        in energy and costs up to 0.01 AUC (mesh001, 004, 013). The energy picked a right map wherever one was among
+        the runs, so the default runs all three, (6, 10, (6, 20))
     iterations : ICP iterations per scale at most (stops when the sampled map no longer changes)
     sample : source vertices used in the ICP steps (seeded); the final map covers every vertex
     features : optional ((n_s, f), (n_t, f)) intrinsic functions that correspond on the two shapes (e.g. the
