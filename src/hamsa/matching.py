@@ -317,9 +317,9 @@ def match_icskm(
     stops there with that run's result; the runs whose energy on the third is within :data:`NEAR_TIE` of the lowest are
     all run on the whole sample, where the lowest energy wins. No ground truth is used. On TOSCA with one landmark the
     flip that wins was psi_2, psi_4 or psi_5 depending on the shape and the landmark, and the lowest energy picked the
-    right start where we checked (centaur: 0.017 vs 0.033 for the partial mirror, michael: 0.0012 vs 0.0066); on david0
-    -> 1 with three landmarks the third alone picked a worse map (the psi_2 flip, 0.0037 vs 0.0047 on the third, 0.0152
-    vs 0.0140 on the whole sample: AUC 0.68 against 0.78).
+    right start where we checked (centaur: 0.017 vs 0.033 for the partial mirror, michael: 0.0012 vs 0.0066); on
+    david0 -> 1 with three landmarks the third alone picked a worse map (the psi_2 flip, 0.0037 vs 0.0047 on the
+    third, 0.0152 vs 0.0140 on the whole sample: AUC 0.68 against 0.78).
 
     Parameters
     ----------
@@ -369,7 +369,7 @@ def match_icskm(
     plans = _heat_schedules(scales)
     if int(iterations) < 1:
         raise HamsaError(f"need at least one ICP iteration, got {iterations}")
-    # coarse to fine: from the scale where about the first j eigenfunctions count (j >= 5, not the ground
+    # coarse to fine: from the scale where about the first j eigenfunctions count (j = 5 or more, not the ground
     # state's: a Hamiltonian's E_1 can be near 0 and a scale set by it keeps psi_1 alone, collapsing the map)
     # to the one where all k do; every schedule ends at the same finest scale, so their energies compare
     spectrum = np.abs(source.values)
