@@ -12,7 +12,7 @@ from hamsa.operators import hamiltonian
 @pytest.fixture(scope="module")
 def capsule():
     mesh = shapes.capsule(0.5, 3.0, 32)
-    return hamsa.TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)  # unit area
+    return mesh.scaled_to_unit_area()
 
 
 def test_woodbury_equals_a_dense_inverse(capsule):

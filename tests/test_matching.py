@@ -33,11 +33,6 @@ def pair():
     return flat, rolled
 
 
-def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:
-    """The mesh centred and scaled to unit area (as the matching benchmark does)."""
-    return hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
-
-
 def test_functional_map_of_an_isometry_is_nearly_diagonal_and_recovers_the_map(pair):
     flat, rolled = pair
     k = 20
@@ -119,10 +114,10 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
 
     from conftest import data_mesh
 
-    source = unit_area(data_mesh("scape/meshes/mesh000.off.gz"))
+    source = data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area()
     points = sample_points(source.n_vertices, 1000)
     for name, count, expected in (("mesh001", 3, "both"), ("mesh030", 1, "hamiltonian")):
-        target = unit_area(data_mesh(f"scape/meshes/{name}.off.gz"))
+        target = data_mesh(f"scape/meshes/{name}.off.gz").scaled_to_unit_area()
         landmarks = np.random.default_rng(1).choice(source.n_vertices, count, replace=False)
         errors = {}
         for basis in ("lbo", "hamiltonian"):
@@ -154,11 +149,8 @@ def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur(
 
     from conftest import DATA
 
-    def unit(mesh):
-        return hamsa.TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)
-
     tosca = load_tosca(DATA / "tosca_hires")
-    source, target = (unit(tosca.load(name)[0]) for name in ("centaur0", "centaur1"))
+    source, target = (tosca.load(name)[0].scaled_to_unit_area() for name in ("centaur0", "centaur1"))
     landmark = np.array([7461])  # same vertex ids within a class: the true map is the identity
     bases = [hamsa.eigenbasis(m, 100, potentials.geodesic_distance(m, landmark)) for m in (source, target)]
     points = sample_points(source.n_vertices, 1000)
@@ -183,7 +175,7 @@ def test_icskm_restarts_that_nearly_tie_on_a_third_of_the_sample_are_decided_on_
 
     tosca = load_tosca(DATA / "tosca_hires")
     source, target = (tosca.load(name)[0] for name in ("david0", "david1"))
-    source, target = unit_area(source), unit_area(target)
+    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
     landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)  # identity ground truth
     _, mapping = match_icskm(hamsa.eigenbasis(source, 100), hamsa.eigenbasis(target, 100), landmarks, landmarks)
     points = sample_points(source.n_vertices, 1000)
@@ -204,13 +196,13 @@ def test_icskm_heat_schedules_decided_by_energy_avoid_the_limb_swap_each_one_mak
 
     from conftest import data_mesh
 
-    source = unit_area(data_mesh("scape/meshes/mesh000.off.gz"))
+    source = data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area()
     landmark = np.random.default_rng(1).choice(source.n_vertices, 1, replace=False)  # identity ground truth
     points = sample_points(source.n_vertices, 1000)
     source_basis = hamsa.eigenbasis(source, 100, potentials.geodesic_distance(source, landmark))
     auc = {}
     for name, swapping in (("mesh013", 6), ("mesh004", 10), ("mesh006", (6, 10))):
-        target = unit_area(data_mesh(f"scape/meshes/{name}.off.gz"))
+        target = data_mesh(f"scape/meshes/{name}.off.gz").scaled_to_unit_area()
         bases = source_basis, hamsa.eigenbasis(target, 100, potentials.geodesic_distance(target, landmark))
         for scales in (swapping, "default"):
             _, mapping = match_icskm(*bases, landmark, landmark, **({} if scales == "default" else {"scales": scales}))
@@ -232,8 +224,8 @@ def test_landmark_distances_as_icskm_features_stop_a_limb_swap_on_scape():
     from conftest import data_mesh
 
     source, target = (
-        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
-        unit_area(data_mesh("scape/meshes/mesh006.off.gz")),
+        data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area(),
+        data_mesh("scape/meshes/mesh006.off.gz").scaled_to_unit_area(),
     )
     landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)
     meshes = (source, target)
@@ -287,8 +279,8 @@ def test_sgfe_with_the_area_distortion_potential_beats_the_lbo_on_scape():
     from conftest import data_mesh
 
     source, target = (
-        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
-        unit_area(data_mesh("scape/meshes/mesh002.off.gz")),
+        data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area(),
+        data_mesh("scape/meshes/mesh002.off.gz").scaled_to_unit_area(),
     )
     V_s, V_t = potentials.area_distortion(source, target), potentials.area_distortion(target, source)
     points = sample_points(source.n_vertices, 1000)
@@ -326,8 +318,8 @@ def test_hamiltonian_hks_beats_lbo_hks_on_a_scape_pair():
 
     from conftest import data_mesh
 
-    source = unit_area(data_mesh("scape/meshes/mesh000.off.gz"))
-    target = unit_area(data_mesh("scape/meshes/mesh005.off.gz"))
+    source = data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area()
+    target = data_mesh("scape/meshes/mesh005.off.gz").scaled_to_unit_area()
     lbo_s, lbo_t = hamsa.eigenbasis(source, 100), hamsa.eigenbasis(target, 100)
     times = default_hks_times(lbo_s, 50)
     points = sample_points(source.n_vertices, 1000)
@@ -372,8 +364,8 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
     from conftest import DATA, data_mesh
 
     source, target = (
-        unit_area(data_mesh("scape/meshes/mesh000.off.gz")),
-        unit_area(data_mesh("scape/meshes/mesh020.off.gz")),
+        data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area(),
+        data_mesh("scape/meshes/mesh020.off.gz").scaled_to_unit_area(),
     )
     landmarks = np.random.default_rng(0).choice(
         np.loadtxt(DATA / "scape" / "kim_landmarks" / "scape.pid", dtype=np.int64, ndmin=2)[:, 0], 3, replace=False

@@ -97,3 +97,15 @@ def test_largest_component_keeps_the_body_and_its_vertex_ids():
     np.testing.assert_array_equal(kept, np.arange(len(vertices), mesh.n_vertices))
     np.testing.assert_array_equal(kept_mesh.faces, body.faces)
     assert kept_mesh.n_components == 1 and body.largest_component()[0] is body
+
+
+def test_scaled_to_unit_area_centers_and_scales_the_spectrum_by_the_area():
+    capsule = shapes.capsule(0.5, 2.0, 16)
+    mesh = hamsa.TriMesh(capsule.vertices * 3.0 + [1.0, -2.0, 4.0], capsule.faces)
+    unit = mesh.scaled_to_unit_area()
+    assert unit.area == pytest.approx(1.0, rel=1e-12)
+    np.testing.assert_allclose(unit.vertices.mean(axis=0), 0.0, atol=1e-12)
+    np.testing.assert_array_equal(unit.faces, mesh.faces)
+    # Laplacian eigenvalues scale as 1 / length^2 = 1 / area: E(unit) = area * E(mesh)
+    original, scaled = hamsa.eigenbasis(mesh, 8).values, hamsa.eigenbasis(unit, 8).values
+    np.testing.assert_allclose(scaled[1:], mesh.area * original[1:], rtol=1e-8)

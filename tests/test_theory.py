@@ -12,7 +12,7 @@ from conftest import data_mesh
 @pytest.fixture(scope="module")
 def scape():
     mesh = data_mesh("scape/meshes/mesh000.off.gz")
-    return hamsa.TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)  # unit area
+    return mesh.scaled_to_unit_area()
 
 
 @pytest.mark.data

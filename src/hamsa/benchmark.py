@@ -282,7 +282,7 @@ def _identity_truth(source_kept: np.ndarray, target_kept: np.ndarray, n_target_o
 def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: dict, path: Path) -> dict:
     source, source_kept = dataset.load(source_name, largest_component=True)  # (as Kim et al.: loose pieces
     target, target_kept = dataset.load(target_name, largest_component=True)  # dropped; TOSCA's gorilla)
-    source, target = _unit_area(source), _unit_area(target)
+    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
     truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
     result = evaluate_pair(
         source,
@@ -312,10 +312,6 @@ def _run_pair_or_failure(dataset: Dataset, source_name: str, target_name: str, s
         return _run_pair(dataset, source_name, target_name, settings, path)
     except Exception as error:  # reported in the table and by the CLI's exit status, never dropped
         return {"source": source_name, "target": target_name, "error": f"{type(error).__name__}: {error}"}
-
-
-def _unit_area(mesh: TriMesh) -> TriMesh:
-    return TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
 
 
 def _settings_key(settings: dict) -> str:

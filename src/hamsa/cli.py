@@ -411,12 +411,11 @@ def _decompress(args) -> None:
 def _modes(args) -> None:
     from hamsa.cmm import compressed_modes
     from hamsa.io import atomic_write
-    from hamsa.mesh import TriMesh
 
     output = _output_path(args.output, ".npz")
     mesh = _load_for_operators(args.mesh, args.repair)
     if args.unit_area:
-        mesh = TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces)
+        mesh = mesh.scaled_to_unit_area()
 
     def report(stage, index, iterations, objective):
         if stage == "admm":
@@ -451,14 +450,10 @@ def _match(args) -> None:
     from hamsa.benchmark import match_pair
     from hamsa.eigen import eigenbasis
     from hamsa.io import atomic_write, load_mesh
-    from hamsa.mesh import TriMesh
 
     output = _output_path(args.output, ".npy")
     start = time.perf_counter()
-    meshes = []
-    for path in (args.source, args.target):
-        mesh = load_mesh(path)
-        meshes.append(TriMesh(mesh.vertices / np.sqrt(mesh.area), mesh.faces))  # unit area: comparable spectra
+    meshes = [load_mesh(path).scaled_to_unit_area() for path in (args.source, args.target)]  # comparable spectra
     landmarks = _landmark_pairs(args.landmarks, meshes) if args.method == "icskm" else None
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")

@@ -114,6 +114,14 @@ class TriMesh:
         used = self._vertices[self.referenced]
         return float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
 
+    def scaled_to_unit_area(self) -> TriMesh:
+        """This mesh centered at its vertex mean and scaled to total area 1 (same faces).
+
+        Eigenvalues scale as 1 / area, so spectra, heat times and potential scales become comparable
+        across shapes; matching and the benchmarks work on unit-area shapes (Kim et al. normalize
+        errors by sqrt(area) for the same reason)."""
+        return TriMesh((self._vertices - self._vertices.mean(axis=0)) / np.sqrt(self.area), self._faces)
+
     # ------------------------------------------------------------------------- connectivity
     @cached_property
     def edges(self) -> np.ndarray:

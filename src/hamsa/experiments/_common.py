@@ -38,19 +38,13 @@ def dataset_or_builtin(args, relative: str):
     the built-in humanoid (rest pose; coarser with --quick), also scaled to unit area."""
     path = data_file(args.data, relative)
     if path and not args.quick:
-        return unit_area(hamsa.load_mesh(path)), f"TOSCA {Path(relative).name.split('.')[0]}", True
+        return hamsa.load_mesh(path).scaled_to_unit_area(), f"TOSCA {Path(relative).name.split('.')[0]}", True
     return builtin_humanoid(args), "built-in humanoid", False
 
 
 def builtin_humanoid(args, pose: str = "rest") -> hamsa.TriMesh:
     """The built-in humanoid at unit area: about 2 000 vertices with --quick, 6 300 without."""
-    return unit_area(hamsa.shapes.humanoid(pose, spacing=0.035 if args.quick else 0.02))
-
-
-def unit_area(mesh: hamsa.TriMesh) -> hamsa.TriMesh:
-    """Scale to total area 1, centered: eigenvalues become comparable across shapes."""
-    vertices = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
-    return hamsa.TriMesh(vertices, mesh.faces)
+    return hamsa.shapes.humanoid(pose, spacing=0.035 if args.quick else 0.02).scaled_to_unit_area()
 
 
 def _plain(value):

@@ -26,7 +26,7 @@ from hamsa.operators import hamiltonian, stiffness_matrix
 from hamsa.optimize import ReducedRepresentationProblem
 from hamsa.theory import critical_potential_scale, eigenvalue_bounds, first_order_eigenvector
 
-from ._common import Timer, parse_args, unit_area, write_json
+from ._common import Timer, parse_args, write_json
 
 
 def _theorem1(mesh, V, k):
@@ -124,12 +124,12 @@ def run(args) -> dict:
     timer = Timer()
     rng = np.random.default_rng(0)
     n_around = 24 if args.quick else 40
-    mesh = unit_area(shapes.capsule(0.5, 2.0, n_around))
+    mesh = shapes.capsule(0.5, 2.0, n_around).scaled_to_unit_area()
     k = 21
     V = rng.random(mesh.n_vertices) * 50
     lbo, basis, violation = _theorem1(mesh, V, k)
     residual_ratio, random_ratio = _residual_bound(mesh, V, basis, rng)
-    small = unit_area(shapes.capsule(0.5, 2.0, 12))
+    small = shapes.capsule(0.5, 2.0, 12).scaled_to_unit_area()
     V_small = rng.random(small.n_vertices) * 50
     gram = basis.vectors.T @ basis.mass @ basis.vectors
     numbers = {

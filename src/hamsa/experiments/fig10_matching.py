@@ -34,7 +34,7 @@ from hamsa import potentials, shapes
 from hamsa.benchmark import BASES, SCORES, evaluate_pair, summarize
 from hamsa.matching import functional_from_map, offdiagonal_energy
 
-from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, unit_area, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
 
 METHODS = ("hks", "wks", "fmap", "icskm", "sgfe")
 
@@ -43,13 +43,13 @@ def _pairs(args):
     """(dataset name, [(source name, target name, source, target)]) with identity ground truth."""
     scape = [data_file(args.data, f"scape/meshes/mesh{i:03d}.off.gz") for i in (0, 1, 5, 20)]
     if all(scape) and not args.quick:
-        meshes = [unit_area(hamsa.load_mesh(p)) for p in scape]
+        meshes = [hamsa.load_mesh(p).scaled_to_unit_area() for p in scape]
         names = [p.name.split(".")[0] for p in scape]
         return "SCAPE", [(names[0], n, meshes[0], m) for n, m in zip(names[1:], meshes[1:])]
     spacing = 0.035 if args.quick else 0.02
     poses = list(shapes.HUMANOID_POSES)
-    rest = unit_area(shapes.humanoid(poses[0], spacing))
-    pairs = [(poses[0], p, rest, unit_area(shapes.humanoid(p, spacing))) for p in poses[1:]]
+    rest = shapes.humanoid(poses[0], spacing).scaled_to_unit_area()
+    pairs = [(poses[0], p, rest, shapes.humanoid(p, spacing).scaled_to_unit_area()) for p in poses[1:]]
     return "built-in humanoid poses", pairs[:2] if args.quick else pairs
 
 

@@ -26,7 +26,7 @@ from hamsa.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, matc
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 
-from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, unit_area, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
 
 MU = TEXTURE_MU
 METHODS = ("hks", "wks")
@@ -43,13 +43,13 @@ def _pairs(args):
                 continue
             (source, source_kept), (target, target_kept) = dataset.load(source_name), dataset.load(target_name)
             truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
-            pairs.append((source_name, target_name, unit_area(source), unit_area(target), truth))
+            pairs.append((source_name, target_name, source.scaled_to_unit_area(), target.scaled_to_unit_area(), truth))
         return "TOSCA dogs", pairs
     spacing = 0.035 if args.quick else 0.02
     poses = list(shapes.HUMANOID_POSES)
-    rest = unit_area(shapes.humanoid(poses[0], spacing))
+    rest = shapes.humanoid(poses[0], spacing).scaled_to_unit_area()
     pairs = [
-        (poses[0], pose, rest, unit_area(shapes.humanoid(pose, spacing)), np.arange(rest.n_vertices))
+        (poses[0], pose, rest, shapes.humanoid(pose, spacing).scaled_to_unit_area(), np.arange(rest.n_vertices))
         for pose in poses[1:3]
     ]
     return "built-in humanoid poses", pairs

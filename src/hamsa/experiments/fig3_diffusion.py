@@ -19,7 +19,7 @@ from hamsa import viz
 from hamsa.diffusion import heat_kernel, total_heat
 from hamsa.geodesic import geodesic_distance
 
-from ._common import Timer, builtin_humanoid, data_file, parse_args, unit_area, write_json
+from ._common import Timer, builtin_humanoid, data_file, parse_args, write_json
 
 
 def run(args) -> dict:
@@ -27,7 +27,7 @@ def run(args) -> dict:
     path = data_file(args.data, "tosca_hires/meshes/centaur0.off.gz")
     landmarks = data_file(args.data, "tosca_hires/kim_landmarks/centaur.pid")
     if path and landmarks and not args.quick:
-        mesh = unit_area(hamsa.load_mesh(path))
+        mesh = hamsa.load_mesh(path).scaled_to_unit_area()
         ids = np.loadtxt(landmarks, dtype=np.int64)[:, 0]
         # TOSCA's centaur stands along +z, facing -y: look at its side
         head, leg, name, view = int(ids[1]), int(ids[5]), "TOSCA centaur0", ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))

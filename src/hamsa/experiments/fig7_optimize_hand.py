@@ -18,17 +18,17 @@ import hamsa
 from hamsa import shapes, viz
 from hamsa.optimize import optimize_potential
 
-from ._common import Timer, data_file, parse_args, unit_area, write_json
+from ._common import Timer, data_file, parse_args, write_json
 
 
 def run(args) -> dict:
     timer = Timer()
     path = data_file(args.data, "classic/hand_6k.off")
     if path and not args.quick:
-        mesh, name = unit_area(hamsa.load_mesh(path)), "hand_6k"
+        mesh, name = hamsa.load_mesh(path).scaled_to_unit_area(), "hand_6k"
         k, m, iterations = 50, 300, 60
     else:
-        mesh, name = unit_area(shapes.hand(spacing=0.06 if args.quick else 0.035)), "built-in hand"
+        mesh, name = shapes.hand(spacing=0.06 if args.quick else 0.035).scaled_to_unit_area(), "built-in hand"
         k, m, iterations = 20, 100, 40
     X = mesh.vertices
     result = optimize_potential(mesh, X, k, m=m, max_iterations=iterations)

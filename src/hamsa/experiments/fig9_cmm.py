@@ -27,17 +27,20 @@ from hamsa import shapes, viz
 from hamsa.cmm import compressed_modes
 from hamsa.noise import refine_region
 
-from ._common import Timer, data_file, parse_args, save_figure, unit_area, write_json
+from ._common import Timer, data_file, parse_args, save_figure, write_json
 
 
 def run(args) -> dict:
     timer = Timer()
-    meshes = [("capsule", unit_area(shapes.capsule(0.5, 3.0, n))) for n in ((16, 24) if args.quick else (24, 40, 64))]
+    meshes = [
+        ("capsule", shapes.capsule(0.5, 3.0, n).scaled_to_unit_area())
+        for n in ((16, 24) if args.quick else (24, 40, 64))
+    ]
     counts = {"capsule": (4,) if args.quick else (10, 20, 40)}
     for name in () if args.quick else ("hand_6k.off", "hand_14k.off"):
         path = data_file(args.data, f"classic/{name}")
         if path:
-            meshes.append((name.split(".")[0], unit_area(hamsa.load_mesh(path))))
+            meshes.append((name.split(".")[0], hamsa.load_mesh(path).scaled_to_unit_area()))
             counts[name.split(".")[0]] = (20,)
     mu = 100.0
     repeat = 1 if args.quick else 2
@@ -125,7 +128,7 @@ def _discretization(args, path) -> dict:
     """Modes of a capsule and of the same surface refined on its x > 0 half (:func:`hamsa.noise.refine_region`):
     for each mode of the first, the largest |<phi, phi'>_A| with a mode of the second (on the shared
     vertices), for the consistent (area-weighted) and the plain vector L1 norm, both methods."""
-    mesh = unit_area(shapes.capsule(0.5, 3.0, 20 if args.quick else 28))
+    mesh = shapes.capsule(0.5, 3.0, 20 if args.quick else 28).scaled_to_unit_area()
     refined = refine_region(mesh, mesh.vertices[mesh.faces].mean(axis=1)[:, 0] > 0)
     areas = hamsa.mass_matrix(mesh).diagonal()
     K, mu = (4, 20.0) if args.quick else (6, 20.0)
