@@ -130,9 +130,10 @@ def _corrupted_basis(basis):
 
 def api_cases() -> dict[str, callable]:
     from hamsa import diffusion, potentials
-    from hamsa.benchmark import match_pair
+    from hamsa.geodesic import geodesic_distance
+    from hamsa.paper.benchmark import match_pair
+    from hamsa.paper.reproduce import reproduce
     from hamsa.repair import repair_mesh
-    from hamsa.reproduce import reproduce
     from hamsa.viz import to_html
 
     sphere = shapes.icosphere(2)
@@ -150,8 +151,8 @@ def api_cases() -> dict[str, callable]:
         "potential of strings": lambda: hamsa.eigenbasis(sphere, 4, ["a"] * n),
         "diffusion time 0": lambda: diffusion.heat_kernel(basis, 0.0, [0]),
         "diffusion time negative": lambda: diffusion.diffuse(basis, np.ones(n), -1.0),
-        "empty landmark list": lambda: potentials.geodesic_distance(sphere, []),
-        "landmark out of range": lambda: potentials.geodesic_distance(sphere, [n + 5]),
+        "empty landmark list": lambda: geodesic_distance(sphere, [], normalize=True),
+        "landmark out of range": lambda: geodesic_distance(sphere, [n + 5], normalize=True),
         "mismatched vertex counts": lambda: potentials.area_distortion(sphere, shapes.icosphere(1)),
         "project wrong length": lambda: basis.project(np.ones(n + 1)),
         "mesh from a string": lambda: hamsa.eigenbasis("sphere.off", 4),

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa.benchmark import _unit_area, match_pair, paired_bases
 from hamsa.evaluation import TruthDistances, sample_points, summary
 from hamsa.matching import resolve_signs, resolve_signs_without_truth
+from hamsa.paper.benchmark import match_pair, paired_bases
 
 SCAPE = Path(__file__).resolve().parents[2] / "shared" / "data" / "scape" / "meshes"
 
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     if not SCAPE.is_dir():
         print(f"needs the SCAPE meshes at {SCAPE}")
         return 1
-    source = _unit_area(hamsa.load_mesh(SCAPE / "mesh000.off.gz"))
+    source = hamsa.load_mesh(SCAPE / "mesh000.off.gz").scaled_to_unit_area()
     points = sample_points(source.n_vertices, 1000)
     columns = ["LBO"] + [f"mu={mu:g}" for mu in args.mu] + ["mu=1 no-truth signs", "signs agree"]
     print("HKS nearest neighbours, AUC on [0, 0.25]; mesh000 -> target")
@@ -51,7 +51,7 @@ def main(argv=None) -> int:
 
 def _pair_row(source, index, points, mus, cache, columns) -> list:
     """One target: [LBO AUC, AUC per mu, AUC with signs found without truth, sign agreement]."""
-    target = _unit_area(hamsa.load_mesh(SCAPE / f"mesh{index:03d}.off.gz"))
+    target = hamsa.load_mesh(SCAPE / f"mesh{index:03d}.off.gz").scaled_to_unit_area()
     truth = np.arange(source.n_vertices)
     distances = TruthDistances(target, points)
 

@@ -1,7 +1,7 @@
 """Cost of optimizing the potential, in units of one eigensolve, measured in one run.
 
 The whole hand optimization of paper section 3 (hand_6k, X = vertex coordinates, k = 50, m = 300 LBO
-eigenvectors, 60 L-BFGS iterations: the settings of hamsa.experiments.fig7_optimize_hand) divided by the
+eigenvectors, 60 L-BFGS iterations: the settings of hamsa.paper.experiments.fig7_optimize_hand) divided by the
 time of one k = 50 eigensolve of the same mesh (median of 5). Without ../shared/data, a built-in
 capsule of similar size stands in.
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from hamsa import shapes
-from hamsa.benchmark import benchmark_dataset, evaluate_pair, match_pair
 from hamsa.cli import main
 from hamsa.datasets import load_folder
 from hamsa.errors import HamsaError
 from hamsa.io import save_mesh
+from hamsa.paper.benchmark import benchmark_dataset, evaluate_pair, match_pair
 
 pytest.importorskip("joblib", reason="dataset benchmarks need the [bench] extra")
 
@@ -115,7 +115,7 @@ def test_dataset_benchmark_on_a_dask_cluster_equals_the_local_run(pose_dataset, 
 
 
 def test_summary_per_class_averages_each_class_and_the_whole():
-    from hamsa.benchmark import summarize, table_markdown
+    from hamsa.paper.benchmark import summarize, table_markdown
 
     def record(source, auc):
         rows = [{"method": "hks", "basis": b, "auc": auc, "mean_error": 1 - auc, "within_0.05": auc} for b in

@@ -1,6 +1,6 @@
 import numpy as np
 
-from hamsa.demo import step_potential_demo
+from hamsa.paper.demo import step_potential_demo
 
 
 def test_step_potential_traps_low_modes_and_respects_theorem_1():

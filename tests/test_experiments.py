@@ -15,7 +15,7 @@ pytest.importorskip("matplotlib", reason="the figures need the [viz] extra: pip 
 def report(tmp_path_factory):
     """One ``hamsa reproduce --quick`` run shared by the tests below: (folder, results)."""
     require_rendering()
-    from hamsa.reproduce import reproduce
+    from hamsa.paper.reproduce import reproduce
 
     output = tmp_path_factory.mktemp("report")
     return output, reproduce(output, quick=True, progress=False)
@@ -155,7 +155,7 @@ def test_killed_run_resumes_without_redoing_finished_experiments(tmp_path):
     import sys
     import time
 
-    from hamsa.reproduce import reproduce
+    from hamsa.paper.reproduce import reproduce
 
     command = [sys.executable, "-m", "hamsa", "reproduce", "--quick", "--only", "fig1", "fig6", "-o", str(tmp_path)]
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

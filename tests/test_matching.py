@@ -6,6 +6,7 @@ from hamsa import HamsaError, shapes
 from hamsa.diffusion import default_hks_times, heat_kernel_signature, wave_kernel_signature
 from hamsa.eigen import Eigenbasis
 from hamsa.evaluation import geodesic_errors, summary
+from hamsa.geodesic import geodesic_distance
 from hamsa.matching import (
     functional_from_map,
     functional_map,
@@ -76,12 +77,14 @@ def test_direction_conventions_and_errors(pair):
 def test_icskm_recovers_an_isometry_from_one_landmark(pair):
     """ICSKM from a single landmark pair, with the LBO and with the Hamiltonian of the landmark potential
     (V = geodesic distance from the landmark): both recover the isometry."""
-    from hamsa import potentials
 
     flat, rolled = pair
     landmark = np.array([0])
     everything = np.arange(flat.n_vertices)
-    for V in (None, (potentials.geodesic_distance(flat, landmark), potentials.geodesic_distance(rolled, landmark))):
+    for V in (
+        None,
+        (geodesic_distance(flat, landmark, normalize=True), geodesic_distance(rolled, landmark, normalize=True)),
+    ):
         source = hamsa.eigenbasis(flat, 30, None if V is None else V[0])
         target = hamsa.eigenbasis(rolled, 30, None if V is None else V[1])
         C, mapping = match_icskm(source, target, landmark, landmark)
@@ -109,7 +112,6 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
     either basis; from a single landmark the paper's LBO version (one ICP run, no restarts) flips left and
     right while the Hamiltonian with V = geodesic distance from the landmark does not; with the sign-flipped
     restarts (lowest ICP energy kept) the LBO version does not flip either."""
-    from hamsa import potentials
     from hamsa.evaluation import sample_points
 
     from conftest import data_mesh
@@ -123,7 +125,7 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
         for basis in ("lbo", "hamiltonian"):
             V = [None, None]
             if basis == "hamiltonian":
-                V = [potentials.geodesic_distance(mesh, landmarks) for mesh in (source, target)]
+                V = [geodesic_distance(mesh, landmarks, normalize=True) for mesh in (source, target)]
             bases = hamsa.eigenbasis(source, 50, V[0]), hamsa.eigenbasis(target, 50, V[1])
             for restart in (True, False) if basis == "lbo" and expected != "both" else (True,):
                 single = {} if restart else {"restarts": 0, "scales": 6}  # the paper's one run
@@ -143,7 +145,6 @@ def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur(
     the first antisymmetric function flipped (psi_4) ends in a partial mirror whose ICP energy is lower than
     the unflipped run's; with psi_1..psi_5 each flipped in turn the psi_5 start reaches the lowest energy of
     all and the right map."""
-    from hamsa import potentials
     from hamsa.datasets import load_tosca
     from hamsa.evaluation import sample_points
 
@@ -152,7 +153,7 @@ def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur(
     tosca = load_tosca(DATA / "tosca_hires")
     source, target = (tosca.load(name)[0].scaled_to_unit_area() for name in ("centaur0", "centaur1"))
     landmark = np.array([7461])  # same vertex ids within a class: the true map is the identity
-    bases = [hamsa.eigenbasis(m, 100, potentials.geodesic_distance(m, landmark)) for m in (source, target)]
+    bases = [hamsa.eigenbasis(m, 100, geodesic_distance(m, landmark, normalize=True)) for m in (source, target)]
     points = sample_points(source.n_vertices, 1000)
     errors = {}
     for restarts in (1, 5):  # one schedule: the flips alone
@@ -191,7 +192,6 @@ def test_icskm_heat_schedules_decided_by_energy_avoid_the_limb_swap_each_one_mak
     0.0208); to mesh004, ten do (0.030 against 0.024); to mesh006, both do, and six from 4 ln10 / E_20 do
     not (0.023 against 0.030). Running all three and keeping the lowest finest-scale energy (the default)
     gives the right map on the three pairs."""
-    from hamsa import potentials
     from hamsa.evaluation import sample_points
 
     from conftest import data_mesh
@@ -199,11 +199,11 @@ def test_icskm_heat_schedules_decided_by_energy_avoid_the_limb_swap_each_one_mak
     source = data_mesh("scape/meshes/mesh000.off.gz").scaled_to_unit_area()
     landmark = np.random.default_rng(1).choice(source.n_vertices, 1, replace=False)  # identity ground truth
     points = sample_points(source.n_vertices, 1000)
-    source_basis = hamsa.eigenbasis(source, 100, potentials.geodesic_distance(source, landmark))
+    source_basis = hamsa.eigenbasis(source, 100, geodesic_distance(source, landmark, normalize=True))
     auc = {}
     for name, swapping in (("mesh013", 6), ("mesh004", 10), ("mesh006", (6, 10))):
         target = data_mesh(f"scape/meshes/{name}.off.gz").scaled_to_unit_area()
-        bases = source_basis, hamsa.eigenbasis(target, 100, potentials.geodesic_distance(target, landmark))
+        bases = source_basis, hamsa.eigenbasis(target, 100, geodesic_distance(target, landmark, normalize=True))
         for scales in (swapping, "default"):
             _, mapping = match_icskm(*bases, landmark, landmark, **({} if scales == "default" else {"scales": scales}))
             auc[name, scales] = summary(geodesic_errors(target, mapping[points], points))["auc"]
@@ -217,7 +217,6 @@ def test_icskm_heat_schedules_decided_by_energy_avoid_the_limb_swap_each_one_mak
 def test_landmark_distances_as_icskm_features_stop_a_limb_swap_on_scape():
     """On mesh000 -> mesh006 ICSKM from three landmarks swaps limbs (43% within 0.05); with the geodesic
     distances from the landmarks appended to the embedding it does not (measured 93%)."""
-    from hamsa import potentials
     from hamsa.evaluation import sample_points
     from hamsa.geodesic import GeodesicSolver
 
@@ -229,7 +228,7 @@ def test_landmark_distances_as_icskm_features_stop_a_limb_swap_on_scape():
     )
     landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)
     meshes = (source, target)
-    bases = [hamsa.eigenbasis(m, 100, potentials.geodesic_distance(m, landmarks)) for m in meshes]
+    bases = [hamsa.eigenbasis(m, 100, geodesic_distance(m, landmarks, normalize=True)) for m in meshes]
     features = tuple(GeodesicSolver(m).distances_from(landmarks) for m in meshes)
     points = sample_points(source.n_vertices, 1000)
     within = []
@@ -273,8 +272,8 @@ def test_sgfe_with_the_area_distortion_potential_beats_the_lbo_on_scape():
     """Paper Fig. bench_area: SGFE matching from an HKS functional map; with the area-distortion potential
     (of the ground-truth map, mu = 100) the Hamiltonian version beats the LBO version on mesh000 -> mesh002."""
     from hamsa import potentials
-    from hamsa.benchmark import match_pair
     from hamsa.evaluation import sample_points
+    from hamsa.paper.benchmark import match_pair
 
     from conftest import data_mesh
 
@@ -425,7 +424,7 @@ def test_signs_without_truth_agree_with_the_true_signs_on_an_isometry(pair):
     truth = resolve_signs(source, flipped, np.arange(flat.n_vertices), (1, 2, 3, 4))
     assert truth.tolist() == [-1, 1, -1, -1]
     np.testing.assert_array_equal(resolve_signs_without_truth(source, flipped, (1, 2, 3, 4)), truth)
-    with pytest.raises(HamsaError, match="below size"):
+    with pytest.raises(HamsaError, match="below k"):
         resolve_signs_without_truth(source, flipped, (25,))
 
 
@@ -445,7 +444,7 @@ def test_intrinsic_symmetry_signs_find_a_reflection_of_a_rectangle():
         image = center + (points - center) * flip
         symmetries.append(np.argmin(((image[:, None] - points[None]) ** 2).sum(-1), axis=1))
     patterns = [np.sign(np.diagonal(functional_from_map(symmetry, basis, basis))) for symmetry in symmetries]
-    signs, residual = intrinsic_symmetry_signs(basis, count=15)
+    signs, residual = intrinsic_symmetry_signs(basis, k=15)
     assert any(np.array_equal(signs, pattern) for pattern in patterns)
     assert residual < 1e-3
     # an off-centre bump (height 0.2) breaks every symmetry a little: the pattern found is still one of the
@@ -455,10 +454,10 @@ def test_intrinsic_symmetry_signs_find_a_reflection_of_a_rectangle():
     bumped[:, 2] = 0.2 * np.exp(-((x - 0.5) ** 2 + (y - 0.1) ** 2) / 0.05)
     bumped_basis = hamsa.eigenbasis(hamsa.TriMesh(bumped, plate.faces), 16)
     near = [np.sign(np.diagonal(functional_from_map(symmetry, bumped_basis, bumped_basis))) for symmetry in symmetries]
-    signs, residual = intrinsic_symmetry_signs(bumped_basis, count=15)
+    signs, residual = intrinsic_symmetry_signs(bumped_basis, k=15)
     assert any(np.array_equal(signs, pattern) for pattern in near) and residual > 0.01  # measured 0.075
     # with a corner cut away there is no symmetry: the best pattern leaves a residual above 0.01
     centroids = plate.vertices[plate.faces].mean(axis=1)
     keep = ~((centroids[:, 0] > 1.4) & (centroids[:, 1] > 0.4))
     cut, _ = hamsa.TriMesh(plate.vertices, plate.faces[keep]).without_unreferenced()
-    assert intrinsic_symmetry_signs(hamsa.eigenbasis(cut, 16), count=15)[1] > 0.01  # measured 0.031
+    assert intrinsic_symmetry_signs(hamsa.eigenbasis(cut, 16), k=15)[1] > 0.01  # measured 0.031

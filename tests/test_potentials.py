@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import hamsa
-from hamsa import PotentialError, potentials, shapes
+from hamsa import HamsaError, PotentialError, potentials, shapes
 from hamsa.geodesic import geodesic_distance
 
 
@@ -29,7 +29,7 @@ def test_heat_method_geodesics_on_the_sphere(n, mean_tol):
 
 def test_geodesic_potential_is_normalized_and_multi_source():
     mesh = shapes.sphere(3000)
-    V = potentials.geodesic_distance(mesh, [0, 1500])
+    V = geodesic_distance(mesh, [0, 1500], normalize=True, unreachable="error")
     assert V.min() == 0 and V.max() == 1 and V[0] == 0 and V[1500] == 0
 
 
@@ -38,19 +38,22 @@ def test_geodesic_of_unreached_component_is_infinite():
     two = hamsa.TriMesh(np.vstack([a.vertices, a.vertices + 5]), np.vstack([a.faces, a.faces + a.n_vertices]))
     d = geodesic_distance(two, [0])
     assert np.all(np.isfinite(d[: a.n_vertices])) and np.all(np.isinf(d[a.n_vertices :]))
-    with pytest.raises(PotentialError, match="no source"):
-        potentials.geodesic_distance(two, [0])
-    V = potentials.geodesic_distance(two, [0], unreachable=1.0)  # the loose piece counts as farthest
+    with pytest.raises(HamsaError, match="no source"):
+        geodesic_distance(two, [0], normalize=True, unreachable="error")
+    V = geodesic_distance(two, [0], normalize=True, unreachable="farthest")  # the loose piece counts as farthest
     np.testing.assert_allclose(V[: a.n_vertices], d[: a.n_vertices] / d[: a.n_vertices].max())
     assert np.all(V[a.n_vertices :] == 1.0)
-    with pytest.raises(PotentialError, match="finite"):
-        potentials.geodesic_distance(two, [0], unreachable=np.inf)
+    np.testing.assert_array_equal(geodesic_distance(two, [0], normalize=True, unreachable=0.5)[a.n_vertices :], 0.5)
+    with pytest.raises(HamsaError, match="NaN"):
+        geodesic_distance(two, [0], unreachable=np.nan)
+    with pytest.raises(HamsaError, match="farthest"):
+        geodesic_distance(two, [0], unreachable="far")
 
 
 def test_benchmark_on_a_mesh_with_a_loose_piece():
     """TOSCA's gorilla has small pieces not joined to the body: the landmark potential and the landmark
     distance features treat them as farthest, and the evaluation counts points sent there as unreachable."""
-    from hamsa.benchmark import evaluate_pair
+    from hamsa.paper.benchmark import evaluate_pair
 
     body = shapes.humanoid(spacing=0.05)
     bit = shapes.icosphere(1)

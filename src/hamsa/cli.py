@@ -70,7 +70,7 @@ def _load_for_operators(path: str, repair: bool):
 
 
 def _parser() -> argparse.ArgumentParser:
-    from hamsa.benchmark import METHODS as BENCHMARK_METHODS
+    from hamsa.paper.benchmark import METHODS as BENCHMARK_METHODS
 
     parser = argparse.ArgumentParser(
         prog="hamsa",
@@ -446,10 +446,10 @@ def _modes(args) -> None:
 
 
 def _match(args) -> None:
-    from hamsa import potentials
-    from hamsa.benchmark import match_pair
     from hamsa.eigen import eigenbasis
+    from hamsa.geodesic import geodesic_distance
     from hamsa.io import atomic_write, load_mesh
+    from hamsa.matching import match
 
     output = _output_path(args.output, ".npy")
     start = time.perf_counter()
@@ -460,13 +460,13 @@ def _match(args) -> None:
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
     if args.method == "icskm" and args.potential_scale != 0:
         V = [
-            args.potential_scale * potentials.geodesic_distance(m, ids, unreachable=1.0)
+            args.potential_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
             for m, ids in zip(meshes, landmarks)
         ]
         source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
     else:
         source, target = (eigenbasis(mesh, k) for mesh in meshes)
-    mapping = match_pair(args.method, source, target, landmarks, meshes=meshes)
+    mapping = match(source, target, args.method, landmarks=landmarks, meshes=meshes)
     with atomic_write(output) as handle:
         np.save(handle, mapping)
     print(
@@ -495,8 +495,8 @@ def _landmark_pairs(texts, meshes) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _benchmark_matching(args) -> None:
-    from hamsa.benchmark import benchmark_dataset, table_markdown
     from hamsa.datasets import load_folder, load_scape, load_tosca
+    from hamsa.paper.benchmark import benchmark_dataset, table_markdown
 
     root = Path(args.dataset)
     if not root.is_dir():
@@ -550,7 +550,7 @@ def _view(args) -> None:
 
 
 def _reproduce(args) -> None:
-    from hamsa.reproduce import reproduce
+    from hamsa.paper.reproduce import reproduce
 
     results = reproduce(args.output, data=args.data, quick=args.quick, force=args.force, only=args.only)
     failed = [name for name, r in results["experiments"].items() if r["status"] != "ok"]
@@ -565,7 +565,7 @@ def _reproduce(args) -> None:
 
 
 def _demo(args) -> None:
-    from hamsa.demo import step_potential_demo
+    from hamsa.paper.demo import step_potential_demo
 
     result = step_potential_demo(k=args.k, height=args.height)
     mesh = result.mesh

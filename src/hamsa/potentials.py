@@ -2,7 +2,9 @@
 
 Each function documents its normalization. Scale matters: the effect of V on the eigenbasis depends
 on ``mu * V`` relative to the spectrum (see :func:`hamsa.theory.critical_potential_scale`), so the
-shape-derived potentials here are normalized to a fixed range and the caller picks the scale.
+shape-derived potentials here are normalized to a fixed range and the caller picks the scale. The
+landmark potential of ICSKM is the normalized geodesic distance,
+``hamsa.geodesic.geodesic_distance(mesh, landmarks, normalize=True)``.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import numpy as np
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError, PotentialError
-from hamsa.geodesic import geodesic_distance as _heat_geodesic
 from hamsa.mesh import TriMesh, as_trimesh
 from hamsa.operators import stiffness_matrix, vertex_areas
 
@@ -49,31 +50,6 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
     if not np.isfinite(height):
         raise PotentialError(f"step height must be finite, got {height}")
     return np.where(mask, float(height), 0.0)
-
-
-def geodesic_distance(mesh, sources, normalize: bool = True, unreachable: float | None = None) -> np.ndarray:
-    """Geodesic distance from the nearest of ``sources`` (heat method, :mod:`hamsa.geodesic`).
-
-    With ``normalize=True`` (default) the distance is divided by its largest finite value, so V is in
-    [0, 1] (0 at the landmarks): the paper's landmark potential for ICSKM and the diffusion figure.
-    On a mesh of several pieces, a piece without a source is infinitely far: an error, unless
-    ``unreachable`` gives the value to put there (e.g. 1.0, as far as the farthest reachable vertex,
-    for the loose bits of TOSCA's gorilla).
-    """
-    distance = _heat_geodesic(mesh, sources)
-    finite = np.isfinite(distance)
-    if not np.all(finite):
-        if unreachable is None:
-            raise PotentialError(
-                "some connected components contain no source; their distance is infinite (pass unreachable= "
-                "to give them a value)"
-            )
-        if not np.isfinite(unreachable):
-            raise PotentialError(f"unreachable must be a finite number, got {unreachable}")
-    if normalize:
-        distance = distance / distance[finite].max()
-    distance[~finite] = unreachable if unreachable is not None else np.inf
-    return distance
 
 
 def eigenfunction_sum(basis: Eigenbasis, indices=(1, 2, 3, 4), signs=None) -> np.ndarray:

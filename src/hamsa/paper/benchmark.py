@@ -41,22 +41,12 @@ import numpy as np
 
 from hamsa import __version__, potentials
 from hamsa.datasets import Dataset, cached_eigenbasis
-from hamsa.diffusion import default_hks_times, default_wks_energies, heat_kernel_signature, wave_kernel_signature
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
-from hamsa.geodesic import GeodesicSolver
+from hamsa.geodesic import geodesic_distance
 from hamsa.io import atomic_write
-from hamsa.matching import (
-    functional_map,
-    icp_refine,
-    match_descriptors,
-    match_icskm,
-    match_sgfe,
-    resolve_signs,
-    resolve_signs_without_truth,
-    zoomout,
-)
+from hamsa.matching import match, resolve_signs, resolve_signs_without_truth
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
@@ -70,51 +60,11 @@ SCORES = ("auc", "mean_error", "within_0.05")
 
 
 def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.ndarray:
-    """``map_source_to_target`` by one of :data:`METHODS`, given the two shapes' eigenbases (for ``icskm``
-    and ``icskm_geo`` the landmark pairs ``(source ids, target ids)``; for ``icskm_geo`` and ``sgfe`` the
-    two meshes)."""
-    if method in ("hks", "texture"):
-        times = default_hks_times(source, 50)
-        return match_descriptors(
-            heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-        )
-    if method == "wks":
-        energies, sigma = default_wks_energies(source, 50)
-        return match_descriptors(
-            wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
-        )
-    if method in ("fmap", "sgfe"):
-        small = source.truncate(20), target.truncate(20)
-        times = default_hks_times(source, 30)
-        C = functional_map(
-            *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-        )
-        C, initial = icp_refine(C, *small)
-        if method == "fmap":
-            return zoomout(initial, source, target, sizes=range(20, min(source.k, target.k) + 1, 4))[1]
-        if meshes is None:
-            raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
-        start = np.eye(source.k)
-        start[:20, :20] = C
-        return match_sgfe(*meshes, source, target, start)[1]
-    if method in ("icskm", "icskm_geo"):
-        if landmarks is None:
-            raise HamsaError(f"{method} needs landmark pairs (source ids, target ids)")
-        features = None
-        if method == "icskm_geo":
-            if meshes is None:
-                raise HamsaError("icskm_geo needs the two meshes (for the geodesic distances from the landmarks)")
-            features = tuple(
-                _reachable(GeodesicSolver(mesh).distances_from(ids)) for mesh, ids in zip(meshes, landmarks)
-            )
-        return match_icskm(source, target, *landmarks, features=features)[1]
-    raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-
-
-def _reachable(distances: np.ndarray) -> np.ndarray:
-    """Distances (n, m) with the infinite ones (pieces without the source) set to each column's largest finite."""
-    finite = np.isfinite(distances)
-    return np.where(finite, distances, np.where(finite, distances, -np.inf).max(axis=0))
+    """``map_source_to_target`` by one of :data:`METHODS` (:func:`hamsa.matching.match`; ``texture`` is HKS
+    matching, its difference being the potential of its Hamiltonian basis)."""
+    if method not in METHODS:
+        raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
+    return match(source, target, "hks" if method == "texture" else method, landmarks=landmarks, meshes=meshes)
 
 
 def paired_bases(
@@ -201,8 +151,8 @@ def evaluate_pair(
         runs["landmarks"] = []
         for draw in range(int(draws)):
             p = np.random.default_rng(seed + 1 + draw).choice(candidates, landmarks, replace=False)
-            V_s = landmark_mu * potentials.geodesic_distance(source, p, unreachable=1.0)  # pieces without a
-            V_t = landmark_mu * potentials.geodesic_distance(target, truth[p], unreachable=1.0)  # landmark: farthest
+            V_s = landmark_mu * geodesic_distance(source, p, normalize=True, unreachable="farthest")
+            V_t = landmark_mu * geodesic_distance(target, truth[p], normalize=True, unreachable="farthest")
             runs["landmarks"].append(((p, truth[p]), {"landmarks": (solve(source, V_s), solve(target, V_t))}))
     rows, curves = [], {}
     for method in methods:

@@ -41,7 +41,7 @@ def run(args) -> dict:
     lbo = hamsa.eigenbasis(mesh, k)
     mu = float(lbo.values[19])
     distance_to_leg = geodesic_distance(mesh, [leg])  # heat method, computed once
-    V = mu * distance_to_leg / distance_to_leg.max()  # = mu * potentials.geodesic_distance(mesh, [leg])
+    V = mu * distance_to_leg / distance_to_leg.max()  # = mu * geodesic_distance(mesh, [leg], normalize=True)
     basis = hamsa.eigenbasis(mesh, k, V)
     times = np.array([10.0, 40.0, 160.0]) / lbo.values[-1]  # long enough for k modes to resolve a point source
     fields, titles, rows = [], [], []

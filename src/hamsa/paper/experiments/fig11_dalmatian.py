@@ -22,9 +22,9 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, shapes, viz
-from hamsa.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, match_pair
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
+from hamsa.paper.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, match_pair
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
 

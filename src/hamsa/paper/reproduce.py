@@ -1,6 +1,6 @@
 """``hamsa reproduce``: every experiment of the paper into one self-contained report.
 
-Runs each module of :mod:`hamsa.experiments` into an output folder and writes
+Runs each module of :mod:`hamsa.paper.experiments` into an output folder and writes
 
 - ``index.html``: the figures (embedded, so the page opens offline and can be mailed), the numbers of
   every experiment, and the checklist of the paper's claims (NOTES.md §8, T1–T17) marked reproduced /
@@ -27,11 +27,11 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from hamsa import __version__
-from hamsa.claims import evaluate_claims
 from hamsa.errors import HamsaError
-from hamsa.experiments import EXPERIMENTS, Experiment
-from hamsa.experiments import _common as common
 from hamsa.io import atomic_write
+from hamsa.paper.claims import evaluate_claims
+from hamsa.paper.experiments import EXPERIMENTS, Experiment
+from hamsa.paper.experiments import _common as common
 
 
 def _sha256(path: Path) -> str:

@@ -31,8 +31,8 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, shapes
-from hamsa.benchmark import BASES, SCORES, evaluate_pair, summarize
 from hamsa.matching import functional_from_map, offdiagonal_energy
+from hamsa.paper.benchmark import BASES, SCORES, evaluate_pair, summarize
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
 

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 import hamsa
-from hamsa import potentials, viz
+from hamsa import viz
+from hamsa.geodesic import geodesic_distance
 from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
@@ -28,7 +29,7 @@ def run(args) -> dict:
     k = 10
     lbo = hamsa.eigenbasis(mesh, k)
     tip = int(np.argmax(lbo.vectors[:, 1]))
-    distance = potentials.geodesic_distance(mesh, [tip])
+    distance = geodesic_distance(mesh, [tip], normalize=True)
     mu = float(lbo.values[9])
     V = mu * distance
     clean = hamsa.eigenbasis(mesh, k, V)

@@ -3,7 +3,7 @@
 Every module has ``run(args) -> dict``: ``args`` has ``output`` (a folder), ``data`` (a folder laid out like
 shared/data, or None for built-in shapes) and ``quick`` (smaller sizes). It writes ``<name>.json`` and one or
 more PNGs whose names start with its figure prefix (``fig7_...``) into ``output``, and returns the numbers.
-Each module also runs on its own: ``python -m hamsa.experiments.fig2_step_potential -o report/``.
+Each module also runs on its own: ``python -m hamsa.paper.experiments.fig2_step_potential -o report/``.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Experiment:
-    """One entry of the report: the module ``hamsa.experiments.<name>`` and what it shows."""
+    """One entry of the report: the module ``hamsa.paper.experiments.<name>`` and what it shows."""
 
     name: str
     title: str

@@ -15,6 +15,7 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, viz
+from hamsa.geodesic import geodesic_distance
 from hamsa.nodal import courant_check, nodal_domains
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
@@ -30,7 +31,7 @@ def run(args) -> dict:
     operators = {
         "LBO": None,
         "step": potentials.step(mesh, lbo.vectors[:, 1] > 0, scale),
-        "geodesic": scale * potentials.geodesic_distance(mesh, [tip]),
+        "geodesic": scale * geodesic_distance(mesh, [tip], normalize=True),
     }
     shown = [3, 4, 5, 6]
     fields, titles, numbers = [], [], {"mesh": name, "n_vertices": mesh.n_vertices, "scale": scale, "operators": {}}

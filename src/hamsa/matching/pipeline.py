@@ -1,0 +1,112 @@
+"""One call from two eigenbases to a point map: :func:`match` with any of :data:`METHODS`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hamsa.eigen import Eigenbasis
+from hamsa.errors import HamsaError
+from hamsa.matching.functional import functional_map, icp_refine, zoomout
+from hamsa.matching.icskm import match_icskm
+from hamsa.matching.nearest import match_descriptors
+from hamsa.matching.sgfe import match_sgfe
+
+METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
+# the functional map that starts fmap and sgfe is fitted on this many eigenpairs
+START_K = 20
+
+
+def match(source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landmarks=None, meshes=None) -> np.ndarray:
+    """``map_source_to_target`` (n_s,): for each source vertex, a target vertex, by one of :data:`METHODS`.
+
+    - ``hks`` / ``wks``: nearest neighbours of 50 heat / wave kernel signature columns;
+    - ``fmap``: an HKS-fitted functional map on the first 20 eigenpairs, ICP, then ZoomOut up to k;
+    - ``sgfe``: the spectral gradient fields embedding (:func:`~hamsa.matching.match_sgfe`) from that
+      functional map (needs ``meshes``);
+    - ``icskm``: iterative closest spectral kernel maps (:func:`~hamsa.matching.match_icskm`) from
+      ``landmarks``;
+    - ``icskm_geo``: the same with the geodesic distances from each landmark as extra embedding coordinates
+      (needs ``meshes``).
+
+    Parameters
+    ----------
+    source, target : the two shapes' eigenbases (the LBO's or Hamiltonians'), with the same k for the
+        spectral methods; use shapes scaled alike (e.g. :meth:`hamsa.TriMesh.scaled_to_unit_area`)
+    landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``
+    meshes : (source mesh, target mesh), for ``sgfe`` and ``icskm_geo``
+
+    Raises
+    ------
+    HamsaError
+        On an unknown method or a missing ``landmarks`` / ``meshes``.
+    """
+    if method not in _MATCHERS:
+        raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
+    return _MATCHERS[method](source, target, landmarks, meshes)
+
+
+def _hks(source, target, landmarks, meshes):
+    from hamsa.diffusion import default_hks_times, heat_kernel_signature
+
+    times = default_hks_times(source, 50)
+    return match_descriptors(
+        heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
+    )
+
+
+def _wks(source, target, landmarks, meshes):
+    from hamsa.diffusion import default_wks_energies, wave_kernel_signature
+
+    energies, sigma = default_wks_energies(source, 50)
+    return match_descriptors(
+        wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
+    )
+
+
+def hks_functional_map(source: Eigenbasis, target: Eigenbasis, k: int = START_K) -> tuple[np.ndarray, np.ndarray]:
+    """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
+    ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``."""
+    from hamsa.diffusion import default_hks_times, heat_kernel_signature
+
+    small = source.truncate(k), target.truncate(k)
+    times = default_hks_times(source, 30)
+    C = functional_map(
+        *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
+    )
+    return icp_refine(C, *small)
+
+
+def _fmap(source, target, landmarks, meshes):
+    _, initial = hks_functional_map(source, target)
+    return zoomout(initial, source, target, sizes=range(START_K, min(source.k, target.k) + 1, 4))[1]
+
+
+def _sgfe(source, target, landmarks, meshes):
+    if meshes is None:
+        raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
+    C, _ = hks_functional_map(source, target)
+    start = np.eye(source.k)
+    start[:START_K, :START_K] = C
+    return match_sgfe(*meshes, source, target, start)[1]
+
+
+def _icskm(source, target, landmarks, meshes, features=None):
+    if landmarks is None:
+        raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
+    return match_icskm(source, target, *landmarks, features=features)[1]
+
+
+def _icskm_geo(source, target, landmarks, meshes):
+    from hamsa.geodesic import GeodesicSolver
+
+    if landmarks is None:
+        raise HamsaError("icskm_geo needs landmark pairs (source ids, target ids)")
+    if meshes is None:
+        raise HamsaError("icskm_geo needs the two meshes (for the geodesic distances from the landmarks)")
+    features = tuple(
+        GeodesicSolver(mesh).distances_from(ids, unreachable="farthest") for mesh, ids in zip(meshes, landmarks)
+    )
+    return _icskm(source, target, landmarks, meshes, features)
+
+
+_MATCHERS = {"hks": _hks, "wks": _wks, "fmap": _fmap, "sgfe": _sgfe, "icskm": _icskm, "icskm_geo": _icskm_geo}
