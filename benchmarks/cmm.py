@@ -27,7 +27,7 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "classic"
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-K", type=int, default=20)
+    parser.add_argument("-k", type=int, default=20)
     parser.add_argument("--mu", type=float, default=100.0)
     parser.add_argument("--repeat", type=int, default=1)
     args = parser.parse_args(argv)
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     mesh = hamsa.load_mesh(path) if path else shapes.capsule(0.5, 3.0, 100)
     mesh = hamsa.TriMesh((mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area), mesh.faces)
     print(
-        f"{path.name if path else 'built-in capsule'}: n = {mesh.n_vertices}, K = {args.K}, mu = {args.mu:g}, "
+        f"{path.name if path else 'built-in capsule'}: n = {mesh.n_vertices}, k = {args.k}, mu = {args.mu:g}, "
         "area-weighted L1, stop at 1e-6 relative change of the objective"
     )
     results = {}
@@ -45,7 +45,7 @@ def main(argv=None) -> int:
             start = time.perf_counter()
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                result = compressed_modes(mesh, args.K, args.mu, method=method)
+                result = compressed_modes(mesh, args.k, args.mu, method=method)
             times.append(time.perf_counter() - start)
         results[method] = (statistics.median(times), result, len(caught))
         print(

@@ -60,7 +60,7 @@ def _pair_row(source, index, points, mus, cache, columns) -> list:
 
     row = []
     for mu in mus:
-        bases = paired_bases(source, target, truth, 100, cache, mu=mu)
+        bases = paired_bases(source, target, truth, 100, cache, eigensum_scale=mu)
         if not row:
             row.append(auc(bases["lbo"]))
         row.append(auc(bases["hamiltonian"]))

@@ -150,13 +150,15 @@ def test_landmark_draws_are_pooled_means_of_single_draws(pose_dataset):
         evaluate_pair(source, target, identity, draws=0, **options)
 
 
-def test_landmark_mu_scales_only_the_landmark_hamiltonian(pose_dataset):
+def test_landmark_scale_scales_only_the_landmark_hamiltonian(pose_dataset):
     dataset = load_folder(pose_dataset)
     (source, _), (target, _) = dataset.load("humanoid0"), dataset.load("humanoid2")
     identity = np.arange(source.n_vertices)
     options = dict(k=30, methods=("icskm",), points=300, landmarks=1)
-    plain, scaled = (evaluate_pair(source, target, identity, landmark_mu=mu, **options)["rows"] for mu in (1.0, 100.0))
+    plain, scaled = (
+        evaluate_pair(source, target, identity, landmark_scale=mu, **options)["rows"] for mu in (1.0, 100.0)
+    )
     assert plain[0] == scaled[0]  # the LBO row
     assert plain[1]["basis"] == "hamiltonian" and plain[1] != scaled[1]
-    with pytest.raises(HamsaError, match="landmark_mu"):
-        evaluate_pair(source, target, identity, landmark_mu=0.0, **options)
+    with pytest.raises(HamsaError, match="landmark_scale"):
+        evaluate_pair(source, target, identity, landmark_scale=0.0, **options)

@@ -90,14 +90,14 @@ def test_cli_modes(tmp_path, capsule, capsys):
 
     path = tmp_path / "capsule.off"
     hamsa.save_mesh(capsule, path)
-    assert main(["modes", str(path), "-K", "3", "--mu", "50", "-o", str(tmp_path / "modes.npz")]) == 0
+    assert main(["modes", str(path), "-k", "3", "--mu", "50", "-o", str(tmp_path / "modes.npz")]) == 0
     saved = np.load(tmp_path / "modes.npz")
     assert saved["modes"].shape == (capsule.n_vertices, 3)
     progress = capsys.readouterr().err  # one line per mode in each pass
     assert progress.count("  mode ") == 3 and progress.count("refining mode") == 3
-    admm = ["modes", str(path), "-K", "2", "--mu", "50", "--method", "admm", "-o", str(tmp_path / "admm.npz")]
+    admm = ["modes", str(path), "-k", "2", "--mu", "50", "--method", "admm", "-o", str(tmp_path / "admm.npz")]
     assert main(admm) == 0
     progress = capsys.readouterr().err  # every 100th ADMM iteration, not one line per iteration
     assert "mode 0/" not in progress and 0 < len(progress.splitlines()) <= 101
-    assert main(["modes", str(path), "-K", "3", "--mu", "-5", "-o", str(tmp_path / "bad.npz")]) == 2
+    assert main(["modes", str(path), "-k", "3", "--mu", "-5", "-o", str(tmp_path / "bad.npz")]) == 2
     assert not (tmp_path / "bad.npz").exists()

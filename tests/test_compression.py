@@ -72,7 +72,7 @@ def test_corrupted_or_truncated_files_raise(mesh):
 def test_cli_compress_and_decompress(tmp_path, mesh, capsys):
     source = tmp_path / "m.off"
     hamsa.save_mesh(mesh, source)
-    assert main(["compress", str(source), "-o", str(tmp_path / "m.hmz"), "--coeffs", "20", "--bits", "10"]) == 0
+    assert main(["compress", str(source), "-o", str(tmp_path / "m.hmz"), "-k", "20", "--bits", "10"]) == 0
     assert main(["decompress", str(tmp_path / "m.hmz"), "--faces", str(source), "-o", str(tmp_path / "d.obj")]) == 0
     decoded = hamsa.load_mesh(tmp_path / "d.obj")
     assert decoded.n_vertices == mesh.n_vertices and rms_error(mesh, decoded.vertices) < 0.05

@@ -1,10 +1,32 @@
 """hamsa: Hamiltonian spectral shape analysis.
 
 The Hamiltonian ``H = -Laplacian + V`` on triangle meshes, discretized with linear finite elements as
-``(W + A diag(V)) psi = E A psi``, and the spectral tools built on its eigenbasis.
+``(W + A diag(V)) psi = E A psi``, and the spectral tools built on its eigenbasis. ``import hamsa`` gives
+the library's submodules (``hamsa.diffusion``, ``hamsa.matching``, ...); the paper's reproduction is
+``hamsa.paper`` (imported on demand).
 """
 
-from hamsa import shapes
+from hamsa import (
+    cmm,
+    compression,
+    datasets,
+    diffusion,
+    errors,
+    evaluation,
+    geodesic,
+    io,
+    matching,
+    mesh,
+    nodal,
+    noise,
+    operators,
+    optimize,
+    potentials,
+    repair,
+    shapes,
+    theory,
+    viz,
+)
 from hamsa.eigen import Eigenbasis, eigenbasis, generalized_eigsh
 from hamsa.errors import HamsaError, MeshError, MissingDependencyError, PotentialError, SolverError
 from hamsa.io import load_mesh, save_mesh
@@ -16,6 +38,24 @@ __version__ = "0.1.8"
 
 __all__ = [
     "Eigenbasis",
+    "cmm",
+    "compression",
+    "datasets",
+    "diffusion",
+    "errors",
+    "evaluation",
+    "geodesic",
+    "io",
+    "matching",
+    "mesh",
+    "nodal",
+    "noise",
+    "operators",
+    "optimize",
+    "potentials",
+    "repair",
+    "theory",
+    "viz",
     "HamsaError",
     "MeshError",
     "MissingDependencyError",

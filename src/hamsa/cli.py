@@ -118,7 +118,7 @@ def _parser() -> argparse.ArgumentParser:
     compress.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
     compress.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     compress.add_argument("-o", "--output", required=True, help="output .hmz")
-    compress.add_argument("--coeffs", type=_positive_int, required=True, help="coefficients per coordinate")
+    compress.add_argument("-k", type=_positive_int, required=True, help="basis functions (coefficients per coordinate)")
     compress.add_argument("--bits", type=_positive_int, default=12, help="bits per coefficient (default 12)")
     compress.add_argument("--method", choices=("mhb", "hamiltonian", "hamiltonian-opt"), default="mhb")
 
@@ -132,7 +132,7 @@ def _parser() -> argparse.ArgumentParser:
     modes = commands.add_parser("modes", help="compressed manifold modes by IRLS Hamiltonian eigenproblems (paper 4)")
     modes.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
     modes.add_argument("--repair", action="store_true", help=REPAIR_HELP)
-    modes.add_argument("-K", type=_positive_int, required=True, help="number of modes")
+    modes.add_argument("-k", type=_positive_int, required=True, help="number of modes")
     modes.add_argument("--mu", type=float, required=True, help="L1 weight (for a unit-area mesh, 10-500)")
     modes.add_argument("--method", choices=("hamiltonian", "admm"), default="hamiltonian")
     modes.add_argument("--unit-area", action="store_true", help="scale the mesh to unit area first")
@@ -155,10 +155,10 @@ def _parser() -> argparse.ArgumentParser:
         help="icskm: known pairs 'source_vertex:target_vertex' (0-based), e.g. --landmarks 12:40 300:310",
     )
     match.add_argument(
-        "--potential-scale",
+        "--landmark-scale",
         type=float,
         default=1.0,
-        help="icskm: mu of the Hamiltonian basis, V = mu x geodesic distance from the landmarks in [0, 1] "
+        help="icskm: scale s of the Hamiltonian basis, V = s x geodesic distance from the landmarks in [0, 1] "
         "(default 1; 0 = the LBO)",
     )
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
@@ -192,14 +192,14 @@ def _parser() -> argparse.ArgumentParser:
         help="icskm, icskm_geo: independent random landmark draws per pair, errors pooled (default 1)",
     )
     bench.add_argument(
-        "--landmark-mu",
+        "--landmark-scale",
         type=float,
         default=1.0,
-        help="icskm, icskm_geo: scale of the Hamiltonian's landmark potential, mu x geodesic distance from the "
+        help="icskm, icskm_geo: scale s of the Hamiltonian's landmark potential, s x geodesic distance from the "
         "landmarks in [0, 1] on the unit-area shape (default 1)",
     )
     bench.add_argument(
-        "--mu",
+        "--eigensum-scale",
         type=float,
         default=1.0,
         help="hks/wks/fmap: scale of the matching potential (normalized sum of phi_2..phi_5 in [0, 1]; default 1)",
@@ -371,13 +371,13 @@ def _compress(args) -> None:
     _output_path(args.output)
     mesh = _load_for_operators(args.mesh, args.repair)
     start = time.perf_counter()
-    data = compression.encode(mesh, args.coeffs, args.bits, args.method)
+    data = compression.encode(mesh, args.k, args.bits, args.method)
     with atomic_write(args.output) as handle:
         handle.write(data)
     size = compression.sizes(data)
     decoded = compression.decode(data, mesh.faces)
     print(
-        f"{args.method}: {args.coeffs} coefficients x 3 at {args.bits} bits -> {len(data)} bytes, "
+        f"{args.method}: {args.k} coefficients x 3 at {args.bits} bits -> {len(data)} bytes, "
         f"{size.bits_per_vertex:.2f} bits/vertex (payload)"
         + (
             f", vertex order {size.permutation_bits / mesh.n_vertices:.2f} bits/vertex"
@@ -424,12 +424,12 @@ def _modes(args) -> None:
             return
         what = "mode" if stage == "greedy" else "refining mode"
         print(
-            f"  {what} {index + 1}/{args.K}: {iterations} IRLS iterations, objective {objective:.6g}",
+            f"  {what} {index + 1}/{args.k}: {iterations} IRLS iterations, objective {objective:.6g}",
             file=sys.stderr,
             flush=True,
         )
 
-    result = compressed_modes(mesh, args.K, args.mu, method=args.method, callback=report)
+    result = compressed_modes(mesh, args.k, args.mu, method=args.method, callback=report)
     with atomic_write(output) as handle:
         np.savez(
             handle,
@@ -439,7 +439,7 @@ def _modes(args) -> None:
             iterations=np.asarray(result.iterations),
         )
     print(
-        f"{args.K} compressed modes, mu = {args.mu:g}: objective {result.objective:.6g}, "
+        f"{args.k} compressed modes, mu = {args.mu:g}: objective {result.objective:.6g}, "
         f"max |Phi^T A Phi - I| = {result.orthogonality_error:.1e}, {result.seconds:.1f} s"
     )
     print(f"wrote           {output}")
@@ -458,9 +458,9 @@ def _match(args) -> None:
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
-    if args.method == "icskm" and args.potential_scale != 0:
+    if args.method == "icskm" and args.landmark_scale != 0:
         V = [
-            args.potential_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
+            args.landmark_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
             for m, ids in zip(meshes, landmarks)
         ]
         source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
@@ -520,10 +520,10 @@ def _benchmark_matching(args) -> None:
         args.limit,
         args.scheduler,
         landmarks=args.landmarks,
-        mu=args.mu,
+        eigensum_scale=args.eigensum_scale,
         signs=args.signs,
         draws=args.draws,
-        landmark_mu=args.landmark_mu,
+        landmark_scale=args.landmark_scale,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")

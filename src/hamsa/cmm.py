@@ -26,14 +26,10 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from hamsa.eigen import eigenbasis
-from hamsa.errors import HamsaError
+from hamsa.errors import ConvergenceWarning, HamsaError
 from hamsa.factorization import CholeskySolver
 from hamsa.mesh import as_trimesh
 from hamsa.operators import hamiltonian
-
-
-class ConvergenceWarning(UserWarning):
-    """An iterative method stopped at its iteration cap before reaching its tolerance."""
 
 
 class WoodburyInverse:
@@ -64,11 +60,11 @@ class WoodburyInverse:
 
 @dataclass(frozen=True)
 class CompressedModes:
-    """K compressed modes and how they were obtained.
+    """k compressed modes and how they were obtained.
 
     Attributes
     ----------
-    modes : (n, K), A-orthonormal columns (up to ``orthogonality_error``), ordered as computed
+    modes : (n, k), A-orthonormal columns (up to ``orthogonality_error``), ordered as computed
     objective : float, ``tr(Phi^T W Phi) + mu sum_j a_j |Phi_jk|`` summed over the modes
     orthogonality_error : float, ``max |Phi^T A Phi - I|``
     iterations : list of int, IRLS iterations per mode
@@ -95,7 +91,7 @@ def mode_objective(W, weights: np.ndarray, phi: np.ndarray, mu: float) -> float:
 
 def compressed_modes(
     mesh,
-    K: int,
+    k: int,
     mu: float,
     *,
     method: str = "hamiltonian",
@@ -109,12 +105,12 @@ def compressed_modes(
     seed: int = 0,
     callback=None,
 ) -> CompressedModes:
-    """K compressed manifold modes minimizing ``tr(Phi^T W Phi) + mu sum a |Phi|`` with ``Phi^T A Phi = I``.
+    """k compressed manifold modes minimizing ``tr(Phi^T W Phi) + mu sum a |Phi|`` with ``Phi^T A Phi = I``.
 
     Parameters
     ----------
     mesh : TriMesh or (vertices, faces)
-    K : number of modes
+    k : number of modes
     mu : L1 weight (scale-dependent: with a unit-area mesh, mu ~ 1-50 gives compact supports)
     method : "hamiltonian" (IRLS + Woodbury, this paper) or "admm" (the baseline of Neumann et al. 2014,
         see :func:`_admm_modes`), both on the same area-weighted objective and stopping rule
@@ -123,14 +119,14 @@ def compressed_modes(
     max_iterations : IRLS iterations per mode at most
     epsilon : the reweighting floor, relative to max |phi| (``V = 1 / (2 max(|phi|, epsilon max|phi|))``)
     beta : weight of the low-rank term pushing away previous modes (default 1e8 x the largest LBO
-        eigenvalue among the first K)
+        eigenvalue among the first k)
     inverse_steps : inverse-iteration steps on ``H + Z`` per IRLS update (each never increases the
         majorized objective's Rayleigh quotient)
     refine : after the greedy mode-by-mode pass ("hamiltonian"), improve the modes jointly: Jacobi
         rotations of mode pairs that lower the L1 term (``tr(Phi^T W Phi)`` and ``Phi^T A Phi = I`` do not
         change under rotations), then one more IRLS pass in which each mode is re-solved, warm-started,
         A-orthogonal to all the others. The greedy pass alone ends in a worse local minimum: on the 6k hand,
-        K = 20, mu = 100, its objective was 11.6% above ADMM's; refined, 1.9%
+        k = 20, mu = 100, its objective was 11.6% above ADMM's; refined, 1.9%
     l1 : "area" (default): the consistent norm ``sum_j a_j |phi_j|``, a discretization of the integral of
         |phi|; "vector": the plain ``sum_j |phi_j|`` of Neumann et al.'s code, which depends on the sampling
         (denser regions weigh more) — for comparisons only
@@ -138,7 +134,7 @@ def compressed_modes(
     callback : optional ``callback(stage, mode_index, iterations, objective)`` for progress: stage
         "greedy" after each mode of the first pass, "refinement" after each mode of the joint refinement
         (iterations: that pass's), "admm" after each ADMM iteration (mode_index -1: all modes at once;
-        objective: of all K modes)
+        objective: of all k modes)
     """
     if method not in ("hamiltonian", "admm"):
         raise HamsaError(f"method must be 'hamiltonian' or 'admm', got {method!r}")
@@ -146,15 +142,15 @@ def compressed_modes(
         raise HamsaError(f"l1 must be 'area' or 'vector', got {l1!r}")
     mesh = as_trimesh(mesh)
     n = mesh.n_vertices
-    if not 1 <= K < n:
-        raise HamsaError(f"K = {K} must be between 1 and n - 1 = {n - 1}")
+    if not 1 <= k < n:
+        raise HamsaError(f"k = {k} must be between 1 and n - 1 = {n - 1}")
     if not mu >= 0 or not np.isfinite(mu):
         raise HamsaError(f"mu must be a finite number >= 0, got {mu}")
     start = time.perf_counter()
     W, A = hamiltonian(mesh)
     areas = A.diagonal()
     weights = areas if l1 == "area" else np.ones(n)
-    lbo = eigenbasis(mesh, K)
+    lbo = eigenbasis(mesh, k)
     if method == "admm":
         modes, iterations, history = _admm_modes(
             W, A, weights, lbo.vectors, float(lbo.values[-1]), mu, tol, max_iterations * 50, callback
@@ -163,18 +159,18 @@ def compressed_modes(
         return CompressedModes(
             modes,
             mode_objective(W, weights, modes, mu),
-            float(np.abs(gram - np.eye(K)).max()),
+            float(np.abs(gram - np.eye(k)).max()),
             iterations,
             time.perf_counter() - start,
             mu,
             history,
         )
     beta = 1e8 * max(float(lbo.values[-1]), 1.0) if beta is None else float(beta)
-    modes = np.zeros((n, K))
+    modes = np.zeros((n, k))
     rng = np.random.default_rng(seed)
     factor = None
     iterations, history = [], []
-    for i in range(K):
+    for i in range(k):
         previous = modes[:, :i]
         # the LBO eigenvector, slightly perturbed: the constant mode is a fixed point of the reweighting
         # (|phi| constant gives a constant V) though not a minimizer, so start off it
@@ -190,9 +186,9 @@ def compressed_modes(
         history.append({"objective": trace, "majorized": majorized})
         if callback is not None:
             callback("greedy", i, iteration, trace[-1])
-    if refine and K > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
+    if refine and k > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
         _rotate_to_lower_l1(modes, weights)
-        for i in range(K):
+        for i in range(k):
             others = np.delete(modes, i, axis=1)
             U = np.sqrt(beta) * (areas[:, None] * others)
             phi, iteration, trace, majorized, factor = _irls_mode(
@@ -209,7 +205,7 @@ def compressed_modes(
     return CompressedModes(
         modes=modes,
         objective=mode_objective(W, weights, modes, mu),
-        orthogonality_error=float(np.abs(gram - np.eye(K)).max()),
+        orthogonality_error=float(np.abs(gram - np.eye(k)).max()),
         iterations=iterations,
         seconds=time.perf_counter() - start,
         mu=mu,
@@ -272,7 +268,7 @@ def _admm_modes(
       when rho changes);
     * scaled duals ``U += Psi - S``, ``U += Psi - E``.
 
-    rho is fixed at ``100 max(mu, lambda_K)`` (lambda_K the largest of the K LBO eigenvalues): in the
+    rho is fixed at ``100 max(mu, lambda_K)`` (lambda_K the largest of the k LBO eigenvalues): in the
     scaled variables the entries are ~ n^(-1/2), so the shrinkage threshold needs rho >> mu, and the
     E-step needs rho comparable to the spectrum. Neumann et al.'s residual balancing (double or halve rho
     every 10 iterations when one residual exceeds 5x the other) drove rho down to ~10 and diverged on our
@@ -331,7 +327,7 @@ def _rotate_to_lower_l1(modes: np.ndarray, weights: np.ndarray, sweeps: int = 4,
     that minimizes ``sum_v a_v (|phi_i| + |phi_j|)`` (a grid of 33 angles, then 17 finer ones around the
     best). Rotations keep ``Phi^T A Phi`` and ``tr(Phi^T W Phi)``; stops when a sweep gains less than
     ``tol`` of the L1 term."""
-    K = modes.shape[1]
+    k = modes.shape[1]
 
     def cost(x, y, angles):
         c, s = np.cos(angles), np.sin(angles)
@@ -342,8 +338,8 @@ def _rotate_to_lower_l1(modes: np.ndarray, weights: np.ndarray, sweeps: int = 4,
     step = coarse[1] - coarse[0]
     for _ in range(sweeps):
         before = float(weights @ np.abs(modes).sum(axis=1))
-        for i in range(K):
-            for j in range(i + 1, K):
+        for i in range(k):
+            for j in range(i + 1, k):
                 x, y = modes[:, i].copy(), modes[:, j].copy()
                 best = coarse[np.argmin(cost(x, y, coarse))]
                 fine = np.linspace(best - step, best + step, 17)

@@ -1,6 +1,6 @@
 """Spectral mesh-geometry compression (Karni & Gotsman 2000) and the paper's Hamiltonian variant (section 3).
 
-The decoder knows the connectivity; the file carries the first ``n_coeffs`` coefficients of the
+The decoder knows the connectivity; the file carries the first ``k`` coefficients of the
 vertex coordinates in a basis the decoder can rebuild from the connectivity alone:
 
 * ``"mhb"``: eigenvectors of the combinatorial Laplacian ``L = D - Adj`` (Karni-Gotsman; L is symmetric,
@@ -33,17 +33,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from hamsa.eigen import generalized_eigsh
-from hamsa.errors import HamsaError
+from hamsa.errors import CompressionError, HamsaError
 from hamsa.mesh import TriMesh, as_trimesh
 
 MAGIC = b"HMZ"
 VERSION = 1
 METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
-_HEADER = struct.Struct("<IIBdd")  # n, n_coeffs, bits, alpha, beta
-
-
-class CompressionError(HamsaError):
-    """A compressed file is corrupted, truncated, of another version, or does not fit the faces."""
+_HEADER = struct.Struct("<IIBdd")  # n, k, bits, alpha, beta
 
 
 @dataclass(frozen=True)
@@ -70,11 +66,11 @@ def combinatorial_laplacian(faces: np.ndarray, n: int) -> sp.csr_matrix:
     return (sp.diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()
 
 
-def _basis(L: sp.csr_matrix, diagonal: np.ndarray | None, count: int) -> np.ndarray:
+def _basis(L: sp.csr_matrix, diagonal: np.ndarray | None, k: int) -> np.ndarray:
     n = L.shape[0]
     H = L if diagonal is None else (L + sp.diags(diagonal)).tocsr()
     lower = 0.0 if diagonal is None else float(min(diagonal.min(), 0.0))
-    _, vectors, _ = generalized_eigsh(H, sp.identity(n, format="csr"), count, lower_bound=lower)
+    _, vectors, _ = generalized_eigsh(H, sp.identity(n, format="csr"), k, lower_bound=lower)
     return vectors
 
 
@@ -114,14 +110,14 @@ def _dequantize(q: np.ndarray, low: np.ndarray, span: np.ndarray, bits: int) -> 
 
 
 def encode(
-    mesh, n_coeffs: int, bits: int = 12, method: str = "mhb", *, potential=None, optimize_iterations: int = 60
+    mesh, k: int, bits: int = 12, method: str = "mhb", *, potential=None, optimize_iterations: int = 60
 ) -> bytes:
     """Compress the vertex coordinates of ``mesh`` to bytes.
 
     Parameters
     ----------
     mesh : TriMesh or (vertices, faces)
-    n_coeffs : number of basis functions (coefficients per coordinate), < n
+    k : number of basis functions (coefficients per coordinate), < n
     bits : bits per quantized coefficient, 2..24
     method : "mhb", "hamiltonian" or "hamiltonian-opt"
     potential : (n,) optional precomputed optimized potential (in the mesh's vertex order), to share one
@@ -132,8 +128,8 @@ def encode(
     n = mesh.n_vertices
     if method not in METHODS:
         raise HamsaError(f"method must be one of {METHODS}, got {method!r}")
-    if not 1 <= n_coeffs < n - 1:
-        raise HamsaError(f"n_coeffs = {n_coeffs} must be between 1 and n - 2 = {n - 2}")
+    if not 1 <= k < n - 1:
+        raise HamsaError(f"k = {k} must be between 1 and n - 2 = {n - 2}")
     if not 2 <= bits <= 24:
         raise HamsaError(f"bits = {bits} must be between 2 and 24")
     L = combinatorial_laplacian(mesh.faces, n)
@@ -149,9 +145,9 @@ def encode(
             potential = optimize_potential(
                 (L, sp.identity(n, format="csr")),
                 X,
-                n_coeffs,
+                k,
                 mass_weighted=False,
-                m=min(n, 2 * n_coeffs + 50),
+                m=min(n, 2 * k + 50),
                 max_iterations=optimize_iterations,
                 rounds=max(1, optimize_iterations // 10),
             ).potential
@@ -169,9 +165,9 @@ def encode(
     inverse = np.empty(n, dtype=np.int64)
     inverse[order] = np.arange(n)
     L_sorted = L[order][:, order]
-    basis = _basis(L_sorted, diagonal, n_coeffs)
+    basis = _basis(L_sorted, diagonal, k)
     q, low, span = _quantize(basis.T @ X[order], bits)
-    header = _HEADER.pack(n, n_coeffs, bits, alpha, beta) + low.astype("<f8").tobytes() + span.astype("<f8").tobytes()
+    header = _HEADER.pack(n, k, bits, alpha, beta) + low.astype("<f8").tobytes() + span.astype("<f8").tobytes()
     coefficients = lzma.compress(q.astype("<u4").tobytes(), preset=9 | lzma.PRESET_EXTREME)
     permutation = lzma.compress(np.diff(order, prepend=0).astype("<i4").tobytes()) if method == "hamiltonian" else b""
     body = b"".join(_section(x) for x in (header, coefficients, permutation, potential_bytes))
@@ -202,10 +198,10 @@ def decode(data: bytes, faces) -> np.ndarray:
     """Rebuild the vertex coordinates (n, 3), in the original vertex order, from ``encode``'s bytes and the faces."""
     method, (header, coefficient_bytes, permutation_bytes, potential_bytes) = _parse(data)
     try:
-        n, n_coeffs, bits, alpha, beta = _HEADER.unpack_from(header)
+        n, k, bits, alpha, beta = _HEADER.unpack_from(header)
         low = np.frombuffer(header, "<f8", 3, _HEADER.size)
         span = np.frombuffer(header, "<f8", 3, _HEADER.size + 24)
-        q = np.frombuffer(lzma.decompress(coefficient_bytes), "<u4").reshape(n_coeffs, 3)
+        q = np.frombuffer(lzma.decompress(coefficient_bytes), "<u4").reshape(k, 3)
         order = (
             np.cumsum(np.frombuffer(lzma.decompress(permutation_bytes), "<i4")) if permutation_bytes else np.arange(n)
         )
@@ -226,7 +222,7 @@ def decode(data: bytes, faces) -> np.ndarray:
         diagonal = alpha * np.arange(1, n + 1, dtype=np.float64) + beta
     else:
         diagonal = potential
-    basis = _basis(L, diagonal, n_coeffs)
+    basis = _basis(L, diagonal, k)
     coordinates = basis @ _dequantize(q, low, span, bits)
     out = np.empty_like(coordinates)
     out[order] = coordinates

@@ -350,8 +350,7 @@ def generalized_eigsh(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if device == "cuda" and method not in ("auto", "chebyshev"):
         raise SolverError(f"method {method!r} runs on the CPU; on device='cuda' use method='chebyshev' (or 'auto')")
-    if method == "auto":
-        method = "chebyshev" if device == "cuda" else "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
+    method = _resolve_method(method, device, n, k)
     start = time.perf_counter()
     if method == "chebyshev":
         values, vectors, info, _ = _chebyshev(H, A, k, tol, device, initial)
@@ -377,6 +376,14 @@ def generalized_eigsh(
         vectors,
         SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start, info.shift),
     )
+
+
+def _resolve_method(method: str, device: str, n: int, k: int) -> str:
+    """What ``method="auto"`` means for n vertices and k pairs: Chebyshev on a GPU, the dense solver for small
+    problems or k >= n/3, the shift-invert Krylov solver otherwise; other methods are returned as given."""
+    if method != "auto":
+        return method
+    return "chebyshev" if device == "cuda" else "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
 
 
 def _chebyshev(H, A, k, tol, device, initial, return_block=False):
@@ -679,15 +686,7 @@ class HamiltonianEigensolver:
         n = self.stiffness.shape[0]
         V = np.zeros(n) if potential is None else check_potential(potential, n)
         H = self.stiffness + self.mass @ sp.diags(V)
-        method = self.method
-        if method == "auto":
-            method = (
-                "chebyshev"
-                if self.device == "cuda"
-                else "dense"
-                if (n <= _DENSE_MAX_N or 3 * self.k >= n)
-                else "krylov"
-            )
+        method = _resolve_method(self.method, self.device, n, self.k)
         if method == "krylov" and self.factor is None:  # factored (once per solve) inside generalized_eigsh
             self.factor = CholeskySolver.unfactored(H.shape, self.backend)
         previous = self.basis

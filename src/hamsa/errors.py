@@ -1,4 +1,4 @@
-"""The one small error hierarchy of hamsa.
+"""The one small error hierarchy of hamsa, and its warnings.
 
 Every error a user can cause with bad input is a :class:`HamsaError` (a ``ValueError``), so a
 script can catch them all at once, and the command-line tool turns them into one line on stderr
@@ -24,6 +24,10 @@ class SolverError(HamsaError):
     """An eigenproblem request is impossible (k out of range) or the solver did not converge."""
 
 
+class CompressionError(HamsaError):
+    """A compressed file is corrupted, truncated, of another version, or does not fit the faces."""
+
+
 class MissingDependencyError(HamsaError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
 
@@ -34,3 +38,11 @@ class RepairWarning(UserWarning):
 
 class ResourceError(HamsaError, MemoryError):
     """A request would not fit in this machine's memory; the message says how much it needs."""
+
+
+class ConvergenceWarning(UserWarning):
+    """An iterative method stopped at its iteration cap before reaching its tolerance."""
+
+
+class PerformanceNotice(UserWarning):
+    """A faster optional backend is not installed; results are the same, only slower."""

@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from hamsa.errors import SolverError
+from hamsa.errors import PerformanceNotice, SolverError
 
 try:  # pragma: no cover - depends on the environment
     from sksparse.cholmod import CholmodNotPositiveDefiniteError
@@ -34,10 +34,6 @@ def _cholmod_symbolic(matrix):
         return _cholmod_analyze(matrix, mode="simplicial", ordering_method="metis")
     except Exception:  # CHOLMOD built without METIS
         return _cholmod_analyze(matrix, mode="simplicial", ordering_method="amd")
-
-
-class PerformanceNotice(UserWarning):
-    """A faster optional backend is not installed; results are the same, only slower."""
 
 
 _notified = False

@@ -11,7 +11,7 @@ its largest connected component first, as in Kim et al.'s benchmark, whose goril
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
 * ``icskm``: iterative closest spectral kernel maps (Shtern & Kimmel 2014) from ``landmarks`` ground-truth
   pairs drawn at random (seeded), as in the paper; its Hamiltonian is the paper's landmark potential,
-  V = ``landmark_mu`` x geodesic distance from the nearest landmark (normalized to [0, 1]) on each shape;
+  V = ``landmark_scale`` x geodesic distance from the nearest landmark (normalized to [0, 1]) on each shape;
 * ``icskm_geo``: the same with the geodesic distances from each landmark as extra coordinates of the
   embedding (both bases) — hamsa's best pipeline on SCAPE, not one of the paper's;
 * ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
@@ -68,10 +68,16 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
 
 
 def paired_bases(
-    source: TriMesh, target: TriMesh, ground_truth, k: int, cache_dir=None, mu: float = 1.0, signs: str = "truth"
+    source: TriMesh,
+    target: TriMesh,
+    ground_truth,
+    k: int,
+    cache_dir=None,
+    eigensum_scale: float = 1.0,
+    signs: str = "truth",
 ) -> dict:
     """{"lbo": (source basis, target basis), "hamiltonian": (...)} with the paper's matching potential
-    ``mu x`` (normalized sum of phi_2..phi_5, scaled to [0, 1]).
+    ``eigensum_scale x`` (normalized sum of phi_2..phi_5, scaled to [0, 1]).
 
     ``signs``: "truth" resolves the eigenfunction signs with ``ground_truth`` (n_source,) target ids (-1
     where unknown), as the paper assumes; "descriptors" without it
@@ -79,8 +85,8 @@ def paired_bases(
     """
     if signs not in SIGNS:
         raise HamsaError(f"signs must be one of {SIGNS}, got {signs!r}")
-    if not (np.isfinite(mu) and mu > 0):
-        raise HamsaError(f"mu must be a positive number, got {mu}")
+    if not (np.isfinite(eigensum_scale) and eigensum_scale > 0):
+        raise HamsaError(f"eigensum_scale must be a positive number, got {eigensum_scale}")
     solve = _basis_solver(k, cache_dir)
     lbo = solve(source), solve(target)
     if signs == "truth":
@@ -91,7 +97,10 @@ def paired_bases(
     V_t = potentials.eigenfunction_sum(lbo[1], signs=target_signs)
     return {
         "lbo": lbo,
-        "hamiltonian": (solve(source, mu * V_s / V_s.max()), solve(target, mu * V_t / V_t.max())),
+        "hamiltonian": (
+            solve(source, eigensum_scale * V_s / V_s.max()),
+            solve(target, eigensum_scale * V_t / V_t.max()),
+        ),
     }
 
 
@@ -105,30 +114,28 @@ def evaluate_pair(
     seed: int = 0,
     cache_dir=None,
     landmarks: int = 3,
-    mu: float = 1.0,
+    eigensum_scale: float = 1.0,
     signs: str = "truth",
     draws: int = 1,
-    landmark_mu: float = 1.0,
+    landmark_scale: float = 1.0,
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
     ``landmarks``: ground-truth pairs given to ``icskm`` / ``icskm_geo`` (drawn with ``seed`` among the
     vertices that have a true image; the same for both bases). ``draws``: independent landmark draws
     (seeds ``seed + 1``, ``seed + 2``, ...; the first is the single draw's) whose errors are pooled, so
-    the scores of the landmark methods are means over draws: with one landmark, which of two ICP minima
-    is reached depends on where the landmark falls, and one draw per pair decides little. ``mu``,
-    ``signs``: the matching potential's scale and how the eigenfunction signs are resolved (see
-    :func:`paired_bases`). ``landmark_mu``: the scale of the landmark potential (geodesic distance in [0, 1]
-    on a unit-area shape, whose Laplacian eigenvalues run from about 5 to about 1200 at k = 100 on SCAPE,
-    so that mu = 1 barely moves the basis and mu = 10-100 starts to localize the low functions near the
-    landmarks)."""
+    the scores of the landmark methods are means over draws. ``eigensum_scale``, ``signs``: the matching
+    potential's scale and how its eigenfunction signs are resolved (see :func:`paired_bases`).
+    ``landmark_scale``: the scale of the landmark potential, the geodesic distance from the landmarks in
+    [0, 1]; on a unit-area shape the Laplacian eigenvalues are O(10)-O(1000) at k = 100, so a scale of 1
+    barely moves the basis and 10-100 starts to localize the low functions near the landmarks."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
     if int(draws) < 1:
         raise HamsaError(f"need at least one landmark draw, got draws = {draws}")
-    if not (np.isfinite(landmark_mu) and landmark_mu > 0):
-        raise HamsaError(f"landmark_mu must be a positive number, got {landmark_mu}")
+    if not (np.isfinite(landmark_scale) and landmark_scale > 0):
+        raise HamsaError(f"landmark_scale must be a positive number, got {landmark_scale}")
     candidates = np.flatnonzero(truth >= 0)
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
@@ -136,7 +143,7 @@ def evaluate_pair(
     if all(method in _POTENTIAL_OF for method in methods):  # the eigenfunction-sum Hamiltonian is not used
         bases = {"lbo": (solve(source), solve(target))}
     else:
-        bases = paired_bases(source, target, truth, k, cache_dir, mu, signs)
+        bases = paired_bases(source, target, truth, k, cache_dir, eigensum_scale, signs)
     wanted = {_POTENTIAL_OF.get(method) for method in methods}
     special = {}  # potential name -> (source V, target V) of the Hamiltonians other than the paper's default
     if "area" in wanted:
@@ -151,8 +158,8 @@ def evaluate_pair(
         runs["landmarks"] = []
         for draw in range(int(draws)):
             p = np.random.default_rng(seed + 1 + draw).choice(candidates, landmarks, replace=False)
-            V_s = landmark_mu * geodesic_distance(source, p, normalize=True, unreachable="farthest")
-            V_t = landmark_mu * geodesic_distance(target, truth[p], normalize=True, unreachable="farthest")
+            V_s = landmark_scale * geodesic_distance(source, p, normalize=True, unreachable="farthest")
+            V_t = landmark_scale * geodesic_distance(target, truth[p], normalize=True, unreachable="farthest")
             runs["landmarks"].append(((p, truth[p]), {"landmarks": (solve(source, V_s), solve(target, V_t))}))
     rows, curves = [], {}
     for method in methods:
@@ -243,10 +250,10 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         settings["points"],
         cache_dir=settings["cache"],
         landmarks=settings.get("landmarks", 3),
-        mu=settings.get("mu", 1.0),
+        eigensum_scale=settings.get("eigensum_scale", 1.0),
         signs=settings.get("signs", "truth"),
         draws=settings.get("draws", 1),
-        landmark_mu=settings.get("landmark_mu", 1.0),
+        landmark_scale=settings.get("landmark_scale", 1.0),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     with atomic_write(path, "w") as handle:
@@ -288,10 +295,10 @@ def benchmark_dataset(
     scheduler: str | None = None,
     progress: bool = True,
     landmarks: int = 3,
-    mu: float = 1.0,
+    eigensum_scale: float = 1.0,
     signs: str = "truth",
     draws: int = 1,
-    landmark_mu: float = 1.0,
+    landmark_scale: float = 1.0,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -310,8 +317,8 @@ def benchmark_dataset(
     limit : at most this many pairs per class
     landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
     draws : independent landmark draws per pair, pooled (:func:`evaluate_pair`)
-    landmark_mu : scale of the icskm / icskm_geo Hamiltonian's landmark potential (:func:`evaluate_pair`)
-    mu, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
+    landmark_scale : scale of the icskm / icskm_geo Hamiltonian's landmark potential (:func:`evaluate_pair`)
+    eigensum_scale, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -323,10 +330,10 @@ def benchmark_dataset(
         settings["landmarks"] = int(landmarks)
         if draws != 1:  # (one draw stays out of the key: earlier results remain valid)
             settings["draws"] = int(draws)
-        if landmark_mu != 1.0:  # (likewise)
-            settings["landmark_mu"] = float(landmark_mu)
-    if mu != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
-        settings.update(mu=float(mu), signs=signs)
+        if landmark_scale != 1.0:  # (likewise)
+            settings["landmark_scale"] = float(landmark_scale)
+    if eigensum_scale != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
+        settings.update(eigensum_scale=float(eigensum_scale), signs=signs)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
