@@ -64,7 +64,7 @@ def test_mu_zero_recovers_the_lbo_subspace(capsule):
 
 
 def test_bad_requests(capsule):
-    with pytest.raises(HamsaError, match="K"):
+    with pytest.raises(HamsaError, match="k = 0"):
         compressed_modes(capsule, 0, 1.0)
     with pytest.raises(HamsaError, match="mu"):
         compressed_modes(capsule, 3, -1.0)

@@ -92,9 +92,10 @@ def test_fandisk_ordering_at_equal_coefficients():
 
     n = fandisk.n_vertices
     V = optimize_potential(
-        (combinatorial_laplacian(fandisk.faces, n), sp.identity(n, format="csr")),
+        None,
         fandisk.vertices,
         100,
+        operators=(combinatorial_laplacian(fandisk.faces, n), sp.identity(n, format="csr")),
         m=250,
         mass_weighted=False,
         max_iterations=60,

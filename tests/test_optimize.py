@@ -90,7 +90,7 @@ def test_reduced_gradient_converges_to_the_full_one():
 
 def test_one_dimensional_toy_drops_the_error_tenfold():
     W, A, x = interval_operators(200)
-    result = optimize_potential((W, A), x, 15, mass_weighted=False, max_iterations=200)
+    result = optimize_potential(None, x, 15, operators=(W, A), mass_weighted=False, max_iterations=200)
     assert result.loss <= 0.1 * result.lbo_loss
     assert result.history[-1]["loss"] < result.history[0]["loss"]
 
@@ -98,11 +98,23 @@ def test_one_dimensional_toy_drops_the_error_tenfold():
 def test_bad_requests():
     W, A, x = interval_operators(50)
     with pytest.raises(HamsaError, match="rows"):
-        optimize_potential((W, A), x[:-1], 5)
+        optimize_potential(None, x[:-1], 5, operators=(W, A))
     with pytest.raises(HamsaError, match="parametrization"):
-        optimize_potential((W, A), x, 5, parametrization="cubic")
+        optimize_potential(None, x, 5, operators=(W, A), parametrization="cubic")
     with pytest.raises(HamsaError, match="smaller than m"):
-        optimize_potential((W, A), x, 50)
+        optimize_potential(None, x, 50, operators=(W, A))
+    with pytest.raises(HamsaError, match="not both"):
+        optimize_potential(shapes.icosphere(1), x, 5, operators=(W, A))
+    with pytest.raises(HamsaError, match="one size"):
+        optimize_potential(None, x, 5, operators=(W, A[:-1, :-1]))
+
+
+def test_a_pair_is_vertices_and_faces_as_everywhere():
+    mesh = shapes.icosphere(2)
+    pair = optimize_potential((mesh.vertices, mesh.faces), mesh.vertices, 5, m=40, max_iterations=5)
+    same = optimize_potential(mesh, mesh.vertices, 5, m=40, max_iterations=5)
+    np.testing.assert_array_equal(pair.potential, same.potential)
+    assert pair.basis is not None and pair.loss <= pair.lbo_loss
 
 
 @pytest.mark.data

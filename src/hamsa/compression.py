@@ -143,9 +143,10 @@ def encode(
             from hamsa.optimize import optimize_potential
 
             potential = optimize_potential(
-                (L, sp.identity(n, format="csr")),
+                None,
                 X,
                 k,
+                operators=(L, sp.identity(n, format="csr")),
                 mass_weighted=False,
                 m=min(n, 2 * k + 50),
                 max_iterations=optimize_iterations,

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from hamsa.eigen import Eigenbasis, HamiltonianEigensolver, generalized_eigsh
 from hamsa.errors import HamsaError
-from hamsa.mesh import TriMesh
+from hamsa.mesh import as_trimesh
 from hamsa.operators import hamiltonian
 
 PARAMETRIZATIONS = ("signed", "square")
@@ -140,15 +140,20 @@ def representation_loss(basis_vectors: np.ndarray, mass: np.ndarray, X: np.ndarr
     return float(np.sum(weighted * X) - np.sum(projected**2))
 
 
-def _operators(mesh_or_operators, mass_weighted: bool):
-    if isinstance(mesh_or_operators, TriMesh):
-        W, A = hamiltonian(mesh_or_operators)
+def _operators(mesh, operators, mass_weighted: bool):
+    """(W, A, lumped masses a) from a mesh, or from explicit ``operators=(W, A)``."""
+    if (mesh is None) == (operators is None):
+        raise HamsaError("give a mesh (a TriMesh or (vertices, faces)) or operators=(W, A), not both or neither")
+    if mesh is not None:
+        W, A = hamiltonian(as_trimesh(mesh))
     else:
         try:
-            W, A = mesh_or_operators
+            W, A = operators
         except (TypeError, ValueError):
-            raise HamsaError("expected a TriMesh or a (W, A) pair of sparse matrices") from None
+            raise HamsaError("operators must be a (W, A) pair of sparse matrices") from None
         W, A = sp.csr_matrix(W), sp.csr_matrix(A)
+        if W.shape != A.shape or W.shape[0] != W.shape[1]:
+            raise HamsaError(f"operators must be square and of one size, got W {W.shape} and A {A.shape}")
     if not mass_weighted:
         A = sp.identity(W.shape[0], format="csr")
     a = A.diagonal()
@@ -191,10 +196,11 @@ class _Progress:
 
 
 def optimize_potential(
-    mesh_or_operators,
+    mesh,
     X,
     k: int,
     *,
+    operators=None,
     m: int | None = None,
     parametrization: str = "signed",
     mass_weighted: bool = True,
@@ -207,9 +213,11 @@ def optimize_potential(
 
     Parameters
     ----------
-    mesh_or_operators : TriMesh, or a (W, A) pair (e.g. from :func:`hamsa.interval.interval_operators`)
+    mesh : TriMesh or (vertices, faces); None with ``operators``
     X : (n,) or (n, d) data; for a mesh, typically its vertex coordinates
     k : number of eigenvectors representing X
+    operators : a (W, A) pair of sparse matrices instead of a mesh (e.g. from
+        :func:`hamsa.interval.interval_operators`)
     m : LBO eigenvectors spanning the reduced problem (default min(n - 1, max(4 k, k + 100)));
         m >= n - 1 on small problems uses them all (the exact, full problem)
     parametrization : "signed" (V free, the paper's default "for performance") or "square" (V = v^2 >= 0)
@@ -225,10 +233,16 @@ def optimize_potential(
     Returns
     -------
     OptimizationResult with the loss of the full operator at V_opt and at V = 0.
+
+    Raises
+    ------
+    HamsaError
+        On a bad mesh or operators, X with the wrong number of rows or non-finite entries, k >= m, an
+        unknown parametrization, or a non-lumped mass.
     """
     if parametrization not in PARAMETRIZATIONS:
         raise HamsaError(f"parametrization must be one of {PARAMETRIZATIONS}, got {parametrization!r}")
-    W, A, a = _operators(mesh_or_operators, mass_weighted)
+    W, A, a = _operators(mesh, operators, mass_weighted)
     n = W.shape[0]
     X = np.asarray(X, dtype=np.float64)
     if X.shape[0] != n or not np.all(np.isfinite(X)):
@@ -236,33 +250,6 @@ def optimize_potential(
     m = min(n, max(4 * k, k + 100)) if m is None else min(int(m), n)
     if not k < m:
         raise HamsaError(f"k = {k} must be smaller than m = {m}")
-    history: list[dict] = []
-    bar = _Progress(max_iterations, progress)
-    start = time.perf_counter()
-    last = {}
-    problem = None
-
-    def objective(x):
-        V = x if parametrization == "signed" else x**2
-        loss, gradient = problem.loss_and_gradient(V)
-        if parametrization == "square":
-            gradient = 2 * x * gradient
-        last.update(x=x.copy(), loss=loss, gradient=gradient)
-        return loss, gradient
-
-    def record(x):
-        # L-BFGS calls back with the iterate it last evaluated: reuse that evaluation
-        loss, gradient = (last["loss"], last["gradient"]) if np.array_equal(last.get("x"), x) else objective(x)
-        history.append(
-            {
-                "iteration": len(history),
-                "loss": loss,
-                "gradient_norm": float(np.linalg.norm(gradient)),
-                "seconds": time.perf_counter() - start,
-            }
-        )
-        bar.update(len(history), loss, history[-1]["gradient_norm"])
-
     # m eigenvectors of H(V) at every re-centering, warm-started from the last ones. A loose tolerance
     # suffices (the stiffness is projected exactly onto whatever basis we get).
     solver = HamiltonianEigensolver(W, A, m, tol=1e-5, method="dense" if m >= n - 1 or n <= 1500 else "auto")
@@ -272,10 +259,44 @@ def optimize_potential(
         vectors = solver.solve(V).vectors
         return ReducedRepresentationProblem(vectors.T @ (W @ vectors), vectors, a, X, k, epsilon)
 
-    x = np.zeros(n) if parametrization == "signed" else np.full(n, 1e-3)
-    to_V = (lambda y: y) if parametrization == "signed" else (lambda y: y**2)
+    square = parametrization == "square"
+    x, history, lbo_loss = _minimize(subspace, n, square, max_iterations, rounds, progress)
+    V = x**2 if square else x
+    if lbo_loss is None:
+        lbo_loss = subspace(np.zeros(n)).loss(np.zeros(n))
+    values, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, k, lower_bound=float(V.min()))
+    basis = Eigenbasis(values, vectors, A, V) if mesh is not None and mass_weighted else None
+    return OptimizationResult(V, representation_loss(vectors, a, X), lbo_loss, basis, history)
+
+
+def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, progress: bool):
+    """L-BFGS on the reduced problems ``subspace(V)``, re-centred ``rounds`` times, from V = 0 (or v = 1e-3
+    when ``square``: V = v^2). Returns (x, history, the loss at V = 0 or None when ``square``)."""
+    history: list[dict] = []
+    bar = _Progress(max_iterations, progress)
+    start = time.perf_counter()
+    last = {}
+    to_V = (lambda y: y**2) if square else (lambda y: y)
+
+    def objective(x):
+        loss, gradient = problem.loss_and_gradient(to_V(x))
+        if square:
+            gradient = 2 * x * gradient
+        last.update(x=x.copy(), loss=loss, gradient=gradient)
+        return loss, gradient
+
+    def record(x):
+        # L-BFGS calls back with the iterate it last evaluated: reuse that evaluation
+        loss, gradient = (last["loss"], last["gradient"]) if np.array_equal(last.get("x"), x) else objective(x)
+        history.append(
+            {"iteration": len(history), "loss": loss, "gradient_norm": float(np.linalg.norm(gradient)),
+             "seconds": time.perf_counter() - start}
+        )  # fmt: skip
+        bar.update(len(history), loss, history[-1]["gradient_norm"])
+
+    x = np.full(n, 1e-3) if square else np.zeros(n)
     problem = subspace(to_V(x))
-    lbo_loss = problem.loss(np.zeros(n)) if parametrization == "signed" else None
+    lbo_loss = None if square else problem.loss(np.zeros(n))
     current = problem.loss(to_V(x))
     history.append(
         {"iteration": 0, "loss": current, "gradient_norm": float(np.linalg.norm(objective(x)[1])), "seconds": 0.0}
@@ -306,11 +327,4 @@ def optimize_potential(
                 break
     finally:
         bar.close()
-    V = to_V(x)
-    if lbo_loss is None:
-        lbo_loss = subspace(np.zeros(n)).loss(np.zeros(n))
-    values, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, k, lower_bound=float(V.min()))
-    basis = None
-    if isinstance(mesh_or_operators, TriMesh) and mass_weighted:
-        basis = Eigenbasis(values, vectors, A, V)
-    return OptimizationResult(V, representation_loss(vectors, a, X), lbo_loss, basis, history)
+    return x, history, lbo_loss

@@ -38,7 +38,9 @@ def run(args) -> dict:
     axes[1].plot(x, lbo @ (lbo.T @ f), label="LBO, k = 15")
     edge = (x < 0.1) | (x > 0.9)
     for name in ("signed", "square"):
-        result = optimize_potential((W, A), f, k, mass_weighted=False, parametrization=name, max_iterations=iterations)
+        result = optimize_potential(
+            None, f, k, operators=(W, A), mass_weighted=False, parametrization=name, max_iterations=iterations
+        )
         V = result.potential
         _, psi, _ = generalized_eigsh(W + sp.diags(V), identity, k, lower_bound=float(V.min()), method="dense")
         axes[0].plot(x, V, label=f"V ({name})")
