@@ -228,7 +228,10 @@ def _parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser(
         "reproduce", help="run every experiment of the paper and write report/index.html + results.json"
     )
-    reproduce.add_argument("--data", help="folder laid out like shared/data (TOSCA, SCAPE, classic); default: built-in")
+    reproduce.add_argument(
+        "--data",
+        help="data folder with tosca_hires/, scape/ and classic/ (see docs/reproduce.md); default: built-in shapes",
+    )
     reproduce.add_argument("--quick", action="store_true", help="smaller sizes: a few minutes on 2 cores")
     reproduce.add_argument("--force", action="store_true", help="re-run experiments whose cached results are intact")
     reproduce.add_argument(

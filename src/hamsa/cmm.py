@@ -125,8 +125,8 @@ def compressed_modes(
     refine : after the greedy mode-by-mode pass ("hamiltonian"), improve the modes jointly: Jacobi
         rotations of mode pairs that lower the L1 term (``tr(Phi^T W Phi)`` and ``Phi^T A Phi = I`` do not
         change under rotations), then one more IRLS pass in which each mode is re-solved, warm-started,
-        A-orthogonal to all the others. The greedy pass alone ends in a worse local minimum: on the 6k hand,
-        k = 20, mu = 100, its objective was 11.6% above ADMM's; refined, 1.9%
+        A-orthogonal to all the others. The greedy pass alone ends in a worse local minimum
+        (``docs/results/cmm.md`` compares the two with ADMM)
     l1 : "area" (default): the consistent norm ``sum_j a_j |phi_j|``, a discretization of the integral of
         |phi|; "vector": the plain ``sum_j |phi_j|`` of Neumann et al.'s code, which depends on the sampling
         (denser regions weigh more) — for comparisons only

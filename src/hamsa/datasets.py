@@ -1,7 +1,7 @@
 """Shape-correspondence datasets (TOSCA, SCAPE, any folder of meshes) and an on-disk eigenbasis cache.
 
 The data are never shipped with hamsa: every loader takes the dataset folder as an argument (laid out as
-in ``shared/data``: ``meshes/*.off(.gz)``, ``kim_landmarks/<class>.pid``, ``symmetry/<class>.sym``).
+in the Kim et al. benchmark: ``meshes/*.off(.gz)``, ``kim_landmarks/<class>.pid``, ``symmetry/<class>.sym``).
 
 Ground-truth convention: within a class, vertex i of one shape corresponds to vertex i of every other
 (TOSCA's classes and SCAPE are registered this way), so the true map between two shapes of a class is the
@@ -129,7 +129,7 @@ def load_tosca(root) -> Dataset:
 
 def load_scape(root) -> Dataset:
     """SCAPE (Anguelov et al. 2005) as in the Kim et al. benchmark: one class, identity ground truth,
-    per-mesh faces; pairs are mesh000 against the others."""
+    per-mesh faces; pairs are the first mesh (in name order) against the others."""
     dataset = load_folder(root, "SCAPE", class_of=lambda shape: "scape")
     pid = Path(root) / "kim_landmarks" / "scape.pid"
     landmarks = {"scape": np.loadtxt(pid, dtype=np.int64, ndmin=2)[:, 0]} if pid.exists() else {}

@@ -1,7 +1,8 @@
 """Hamiltonian heat diffusion and the heat and wave kernel signatures (paper section 2.6).
 
 The Hamiltonian heat equation is ``du/dt = Laplacian u - V u = -H u`` (the paper's eq. heatKernelH
-prints ``du/dt = H u``, a typo: its own Feynman-Kac formula then has the wrong sign; NOTES.md 2.3).
+prints ``du/dt = H u``, a typo, and its Feynman-Kac formula carries the matching wrong sign; see the
+docs' conventions page).
 Its solution decays: ``u(t) = Psi diag(exp(-E t)) Psi^T A u0``. Every function here takes an
 :class:`~hamsa.eigen.Eigenbasis` of either the LBO (V = 0) or a Hamiltonian, so HKS and WKS come for
 free for any potential (the paper's "Hamiltonian signatures").
@@ -150,7 +151,7 @@ def default_wks_energies(basis: Eigenbasis, count: int = 100, sigma_factor: floa
     """Aubry et al. 2011 log-energy grid: (energies (count,), sigma).
 
     ``e_min = log E_low, e_max = log E_max, sigma = sigma_factor (e_max - e_min) / count``, then the grid
-    ``linspace(e_min + 2 sigma, e_max - 2 sigma, count)`` (the convention of NOTES.md 2.2 (a)).
+    ``linspace(e_min + 2 sigma, e_max - 2 sigma, count)`` (the convention of Aubry et al.'s paper, also pyFM's).
     """
     positive = _positive_spectrum(basis)
     e_min, e_max = np.log(positive.min()), np.log(positive.max())

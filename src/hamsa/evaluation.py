@@ -5,8 +5,8 @@ source points, the error of a point is the geodesic distance on the TARGET betwe
 true images, divided by the square root of the target's area. The cumulative curve gives the
 fraction of points with error <= r for r in [0, 0.25]. "Symmetries are not allowed" (the paper): only
 the true map counts; ``symmetry=`` gives the symmetry-allowed variant (the smaller of the errors to the
-true image and to its left-right partner). Geodesics are the heat method's (:mod:`hamsa.geodesic`;
-mean error about 1.5% on a 10k-vertex sphere, see its docstring), batched over the distinct true images.
+true image and to its left-right partner). Geodesics are the heat method's (:mod:`hamsa.geodesic`,
+first-order accurate in the edge length), batched over the distinct true images.
 """
 
 from __future__ import annotations

@@ -3,9 +3,8 @@
 1. Diffuse heat from the sources for a short time t: ``(A + t W) u = A delta``.
 2. Normalize its gradient per face: ``X = -grad u / |grad u|``.
 3. Recover the distance from ``W phi = -div X`` (our W is PSD, so the sign flips from the paper's L).
-Accuracy: with the default ``t = h^2`` (h the mean edge length) the error is first order in h; on a
-unit sphere the mean relative error against great-circle distances measured 1.9% at 2k vertices and
-1.5% at 10k, the largest (about 6% at 10k) near the source's cut locus (``tests/test_potentials.py``).
+Accuracy: with the default ``t = h^2`` (h the mean edge length) the error is first order in h, largest
+near the source's cut locus (``tests/test_potentials.py`` bounds it against great-circle distances).
 Boundaries get the Neumann solution only. Vertices in connected components without a source are
 infinitely far; ``unreachable=`` says what to put there instead (a value, the farthest reachable distance,
 or an error). ``normalize=True`` divides by the largest finite distance, giving the [0, 1] landmark

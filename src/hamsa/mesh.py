@@ -46,7 +46,7 @@ class TriMesh:
 
     Notes
     -----
-    Unreferenced vertices are allowed (TOSCA's gorilla has 1328), but operators refuse them
+    Unreferenced vertices are allowed (some datasets ship them), but operators refuse them
     because their mass is zero; :meth:`without_unreferenced` removes them and returns the index map.
     Both arrays are read-only; derived quantities are computed once and cached.
 
@@ -227,9 +227,8 @@ class TriMesh:
 
     def largest_component(self) -> tuple[TriMesh, np.ndarray]:
         """The connected component with the most vertices, as ``(mesh, kept)`` like
-        :meth:`without_unreferenced` (``kept[i]``: this mesh's index of the new mesh's vertex i). TOSCA's
-        gorilla, for one, has 37 loose pieces beside its 25 438-vertex body (the Kim et al. benchmark
-        keeps the body alone)."""
+        :meth:`without_unreferenced` (``kept[i]``: this mesh's index of the new mesh's vertex i): e.g. a
+        scanned body without the loose pieces beside it, as the Kim et al. benchmark keeps TOSCA's gorilla."""
         count, labels = self.vertex_components
         if count <= 1:
             return self.without_unreferenced()
@@ -304,8 +303,8 @@ def _face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def _unique_rows(rows: np.ndarray, **kwargs):
     """``np.unique(rows, axis=0, ...)`` for small non-negative integer rows, through one int64 key per row.
 
-    About 5x faster than the structured-array path of ``np.unique(axis=0)`` on millions of rows;
-    falls back to it when the keys would overflow.
+    Much faster than the structured-array path of ``np.unique(axis=0)`` on millions of rows; falls back
+    to it when the keys would overflow.
     """
     base = int(rows.max()) + 1 if rows.size else 1
     if float(base) ** rows.shape[1] >= 2**63:

@@ -67,7 +67,7 @@ def eigenvalue_clusters(values, rtol: float = 1e-6) -> np.ndarray:
 
 
 def courant_check(mesh, basis: Eigenbasis, count: int | None = None, zero_tol: float = 1e-9) -> list[dict]:
-    """Check Courant's nodal theorem on the first ``count`` eigenfunctions (paper Prop. 1, NOTES T6).
+    """Check Courant's nodal theorem on the first ``count`` eigenfunctions (paper Prop. 1).
 
     The discrete version (Davies, Gladwell, Leydold, Stadler 2001) bounds the number of (strong) nodal
     domains of the i-th eigenfunction (1-based) by ``i + r - 1`` where r is the multiplicity of its

@@ -1,6 +1,6 @@
 """Geometric, potential and topological noise, and how much an eigenbasis moves under it (paper 2.8).
 
-All generators take a ``seed`` and are reproducible. Conventions (NOTES.md T11, T12):
+All generators take a ``seed`` and are reproducible. Conventions (where the paper leaves them open):
 
 * vertex noise: i.i.d. Gaussian displacement of each coordinate with standard deviation
   ``sigma = fraction * mean edge length`` (the paper's "sigma_x^2 = 20% of the mean edge length" is

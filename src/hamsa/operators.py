@@ -5,7 +5,7 @@ Conventions (stated once, used everywhere in hamsa):
 * ``W`` is the cotangent stiffness matrix, **positive semidefinite**: ``W_ij = -(cot a_ij + cot b_ij)/2``
   on edges, ``W_ii = -sum_j W_ij``, so ``W @ 1 = 0`` and ``f @ W @ f = integral |grad f|^2 >= 0``.
   The paper's eq. (cotan) prints the opposite sign (a negative semidefinite W), which contradicts
-  H = W + A V, E >= 0 and Theorem 1; we use the PSD sign (shared/paper/NOTES.md section 1.1).
+  H = W + A V, E >= 0 and Theorem 1; we use the PSD sign (the docs' conventions page).
 * ``A`` is the mass matrix: by default the lumped mixed-Voronoi areas of Meyer et al. 2003
   (eq. fem6 of the paper), whose sum is exactly the surface area.
 * Boundary edges have a single cotangent term: natural (Neumann) boundary conditions.
@@ -53,7 +53,7 @@ def stiffness_matrix(mesh) -> sp.csr_matrix:
         ``W_ij = -(cot alpha_ij + cot beta_ij)/2`` for each edge (one term on boundary edges),
         ``W_ii = -sum_{j != i} W_ij``; ``W @ ones = 0``. Units: dimensionless (cotangents), so
         ``f @ W @ f`` is the Dirichlet energy integral of |grad f|^2 over the surface.
-        This is the negation of the paper's eq. (cotan), whose sign is a misprint (NOTES.md 1.1),
+        This is the negation of the paper's eq. (cotan), whose sign is a misprint,
         and equals ``-igl.cotmatrix(V, F)``.
     """
     mesh = as_trimesh(mesh)

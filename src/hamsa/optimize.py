@@ -12,8 +12,8 @@ Gradient. With ``dH = A diag(dV)`` and first-order eigenvector perturbation ``dp
     dL/dV_j = -2 a_j sum_{b <= k} sum_{a > k} G_ab psi_a(j) psi_b(j) / (E_b - E_a),   G = Psi^T A X X^T A Psi.
 
 The paper's closed form ``diag(-2 Psi((Z Psi_k^T X X^T Psi) o B) Psi^T)`` has the wrong sign: the trace
-identity it uses needs B^T, and B is antisymmetric (NOTES.md T8; ``tests/test_optimize.py`` checks ours
-against finite differences). ``1 / (E_b - E_a)`` is stabilized as the paper suggests,
+identity it uses needs B^T, and B is antisymmetric (``tests/test_optimize.py`` checks ours against
+finite differences). ``1 / (E_b - E_a)`` is stabilized as the paper suggests,
 ``1 / ((|E_b - E_a| + eps) sgn(E_b - E_a))`` with sgn(0) = +1.
 
 Cost. The sum over a > k needs all eigenvectors (O(n^3)). As the paper hints, we work in the span of

@@ -57,7 +57,7 @@ def critical_potential_scale(lbo_basis: Eigenbasis, potential, index: int) -> fl
 
     To first order ``E_i(mu) ~ lambda_i + mu <phi_i, V phi_i>_A``; requiring ``E_i > mu max V`` gives
     ``mu < lambda_i / (max V - <phi_i, V phi_i>_A)``. The paper writes psi_i in the denominator, but
-    psi_i depends on mu; the first-order derivation uses the LBO eigenfunction phi_i (NOTES.md T2).
+    psi_i depends on mu; the first-order derivation uses the LBO eigenfunction phi_i.
 
     Returns +inf when the denominator is <= 0 (phi_i already sits where V is maximal).
     """
@@ -75,7 +75,7 @@ def critical_potential_scale(lbo_basis: Eigenbasis, potential, index: int) -> fl
 
 
 def first_order_eigenvector(values, vectors, stiffness_change, mass_change, index: int) -> np.ndarray:
-    """The paper's first-order eigenvector perturbation (eq. perturbation, NOTES.md T13).
+    """The paper's first-order eigenvector perturbation (eq. perturbation).
 
     For ``H psi = E A psi`` perturbed to ``(H + dH) psi~ = E~ (A + dA) psi~``::
 

@@ -2,7 +2,7 @@
 
 For a pair (source, target) with a ground-truth map, :func:`evaluate_pair` builds the bases — the LBO's
 and the Hamiltonian's with the paper's matching potential V = normalized sum of phi_2..phi_5 scaled to
-[0, 1] (eigenfunction signs resolved by the ground truth, as the paper assumes; NOTES T14) — runs the
+[0, 1] (eigenfunction signs resolved by the ground truth, as the paper assumes) — runs the
 matchers and scores them by the Kim et al. protocol (geodesic error on the target / sqrt(area), no
 symmetries, on a seeded sample of source vertices; in :func:`benchmark_dataset` each shape is reduced to
 its largest connected component first, as in Kim et al.'s benchmark, whose gorilla is the body alone):

@@ -1,4 +1,4 @@
-"""The paper's checkable claims (NOTES.md §8, T1–T17) judged from the experiments' numbers.
+"""The paper's checkable claims (numbered T1–T17 in the report) judged from the experiments' numbers.
 
 Each claim names the experiment that measures it and a rule that turns its numbers into a verdict —
 "reproduced", "not reproduced" or "not applicable" — with the measured value in words. A claim whose

@@ -4,7 +4,7 @@ A capsule (a body-like elongated surface) gets a finite step potential ``V = V0`
 and 0 elsewhere. We compare the Laplace-Beltrami eigenpairs (lambda_i, phi_i) with the Hamiltonian's
 (E_i, psi_i): Theorem 1's bounds ``lambda_i <= E_i <= lambda_i + V0``, and the fraction of each
 eigenfunction's A-mass inside the V = 0 region, which stays near 1 while E_i < V0 (the modes are
-trapped, as a particle in a box) and drops once E_i exceeds V0 (paper section 2.3, NOTES.md T7).
+trapped, as a particle in a box) and drops once E_i exceeds V0 (paper section 2.3, claim T7 of the report).
 """
 
 from __future__ import annotations

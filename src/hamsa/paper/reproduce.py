@@ -3,7 +3,7 @@
 Runs each module of :mod:`hamsa.paper.experiments` into an output folder and writes
 
 - ``index.html``: the figures (embedded, so the page opens offline and can be mailed), the numbers of
-  every experiment, and the checklist of the paper's claims (NOTES.md §8, T1–T17) marked reproduced /
+  every experiment, and the checklist of the paper's claims (T1–T17) marked reproduced /
   not reproduced / not applicable with the measured value;
 - ``results.json``: the same numbers and verdicts, for scripts.
 

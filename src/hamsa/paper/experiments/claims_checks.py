@@ -1,4 +1,4 @@
-"""Numerical checks of the paper's theorems on a built-in shape (NOTES.md §8: T1–T5, T8, T13, T15).
+"""Numerical checks of the paper's theorems on a built-in shape (claims T1–T5, T8, T13, T15 of the report).
 
 On a unit-area capsule with a random nonnegative potential V:
 T1  Theorem 1, lambda_i + min V <= E_i <= lambda_i + max V (largest violation, relative);

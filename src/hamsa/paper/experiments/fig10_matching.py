@@ -1,7 +1,7 @@
 """Paper §5 (Figs. 6–10): shape matching with LBO vs Hamiltonian bases, evaluated by the Kim et al. protocol.
 
 Pairs: the built-in humanoid's rest pose against its other poses (identity ground truth), or with
---data SCAPE mesh000 against mesh001, mesh005 and mesh020; all shapes scaled to unit area. For each
+--data the SCAPE meshes 0 against 1, 5 and 20; all shapes scaled to unit area. For each
 pair and each basis — the LBO, and the Hamiltonian with the paper's potential V = normalized sum of
 phi_2..phi_5 in [0, 1] (mu = 1; the eigenfunction signs resolved by the ground truth, as the paper
 assumes) — three matchers:

@@ -1,6 +1,6 @@
 """Paper §5 (Fig. dalmatian): a photometric texture as the potential, on the TOSCA dogs.
 
-The dogs come without texture, so we paint one (as NOTES T14 plans): :func:`hamsa.potentials.dalmatian_texture`
+The dogs come without texture, so we paint one : :func:`hamsa.potentials.dalmatian_texture`
 puts seeded black geodesic spots on the first dog, and the ground truth (shared vertex indexing) carries
 the same coat to every other dog. The texture potential is ``V = mu x luminance`` (1 on white, 0 in the
 spots; mu = 100 on unit-area shapes). For each pair dog0 -> dogN, HKS and WKS nearest-neighbour matching

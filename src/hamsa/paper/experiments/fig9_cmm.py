@@ -4,7 +4,7 @@ Both methods minimize the same area-weighted objective and stop at the same 1e-6
 it. For meshes of several sizes (built-in capsules; with --data also the 6k and 14k hands) and K modes,
 the wall time of each method (mean and std over --repeat runs, default 2) and both objectives; and a
 render of the first IRLS modes, which should show compact supports. Full runs: K in {10, 20, 40} on the
-capsules (mean ± std of 2 runs) and K = 20 on the hands. Discretization robustness (NOTES T17): the modes
+capsules (mean ± std of 2 runs) and K = 20 on the hands. Discretization robustness (claim T17): the modes
 of a capsule and of the same surface refined on one half agree when the L1 norm is the consistent,
 area-weighted one, and not with the plain vector norm of Neumann et al.'s code. Writes fig9_cmm.png (the
 modes), fig9_cmm_runtime.png, fig9_cmm_discretization.png and fig9_cmm.json.
