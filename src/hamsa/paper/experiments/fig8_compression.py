@@ -40,9 +40,10 @@ def run(args) -> dict:
     rows = []
     for count in counts:
         optimized = optimize_potential(
-            (L, sp.identity(n, format="csr")),
+            None,
             mesh.vertices,
             count,
+            operators=(L, sp.identity(n, format="csr")),
             m=min(n, 2 * count + 50),
             mass_weighted=False,
             max_iterations=60,
