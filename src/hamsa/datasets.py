@@ -11,7 +11,6 @@ files are 1-based). Evaluation pairs: every shape against the first shape of its
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 from dataclasses import dataclass, field
@@ -19,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hamsa.cache import content_key
 from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.io import load_mesh
@@ -139,12 +139,8 @@ def load_scape(root) -> Dataset:
 def basis_key(mesh, k: int, potential=None, mass: str = "voronoi") -> str:
     """A hex digest identifying (mesh, potential, k, mass): the cache key of :func:`cached_eigenbasis`."""
     mesh = as_trimesh(mesh)
-    digest = hashlib.sha256()
-    for array in (mesh.vertices, mesh.faces, np.zeros(0) if potential is None else np.asarray(potential, float)):
-        digest.update(np.ascontiguousarray(array).tobytes())
-        digest.update(str(array.shape).encode())
-    digest.update(f"k={k};mass={mass}".encode())
-    return digest.hexdigest()
+    V = np.zeros(0) if potential is None else np.asarray(potential, dtype=np.float64)
+    return content_key(mesh.vertices, mesh.faces, V, {"k": int(k), "mass": mass})
 
 
 def cached_eigenbasis(mesh, k: int, cache_dir, potential=None, mass: str = "voronoi") -> Eigenbasis:

@@ -33,13 +33,12 @@ table (method x basis -> mean AUC on [0, 0.25], mean error, fraction within 0.05
 
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
 
 from hamsa import __version__, potentials
+from hamsa.cache import content_key, load_record, save_record
 from hamsa.datasets import Dataset, cached_eigenbasis
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
@@ -256,8 +255,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         landmark_scale=settings.get("landmark_scale", 1.0),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
-    with atomic_write(path, "w") as handle:
-        json.dump(record, handle)
+    save_record(path, record)
     return record
 
 
@@ -272,16 +270,12 @@ def _run_pair_or_failure(dataset: Dataset, source_name: str, target_name: str, s
 
 
 def _settings_key(settings: dict) -> str:
-    public = {k: v for k, v in settings.items() if k != "cache"}
-    return hashlib.sha256(json.dumps([__version__, public], sort_keys=True).encode()).hexdigest()
+    return content_key(__version__, {k: v for k, v in settings.items() if k != "cache"})
 
 
 def _finished(path: Path, key: str) -> dict | None:
-    try:
-        record = json.loads(path.read_text())
-        return record if record.get("settings_key") == key and record.get("rows") else None
-    except (OSError, ValueError):
-        return None
+    record = load_record(path, key, field="settings_key")
+    return record if record and record.get("rows") else None
 
 
 def benchmark_dataset(
@@ -427,8 +421,7 @@ def table_markdown(table: dict) -> str:
 
 
 def _write_outputs(output: Path, table: dict, records: list[dict], name: str) -> None:
-    with atomic_write(output / "table.json", "w") as handle:
-        json.dump(table, handle, indent=2)
+    save_record(output / "table.json", table, indent=2)
     with atomic_write(output / "table.md", "w") as handle:
         handle.write(table_markdown(table))
     if not records:

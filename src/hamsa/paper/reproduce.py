@@ -20,13 +20,13 @@ import base64
 import hashlib
 import html
 import inspect
-import json
 import time
 import traceback
 from pathlib import Path
 from types import SimpleNamespace
 
 from hamsa import __version__
+from hamsa.cache import content_key, load_record, save_record
 from hamsa.errors import HamsaError
 from hamsa.io import atomic_write
 from hamsa.paper.claims import evaluate_claims
@@ -40,11 +40,8 @@ def _sha256(path: Path) -> str:
 
 def input_key(experiment: Experiment, data: str | None, quick: bool) -> str:
     """Hash of everything an experiment's result depends on: version, source code, data folder, quick."""
-    digest = hashlib.sha256()
-    for part in (__version__, inspect.getsource(experiment.module()), inspect.getsource(common)):
-        digest.update(part.encode())
-    digest.update(json.dumps([str(Path(data).resolve()) if data else None, bool(quick)]).encode())
-    return digest.hexdigest()
+    sources = inspect.getsource(experiment.module()), inspect.getsource(common)
+    return content_key(__version__, *sources, [str(Path(data).resolve()) if data else None, bool(quick)])
 
 
 def _output_files(output: Path, experiment: Experiment) -> list[Path]:
@@ -53,16 +50,14 @@ def _output_files(output: Path, experiment: Experiment) -> list[Path]:
 
 def _cached(state_path: Path, key: str, output: Path) -> dict | None:
     """The recorded result when its key matches and every recorded file is intact, else None."""
-    try:
-        state = json.loads(state_path.read_text())
-        if state["key"] != key or state["status"] != "ok":
-            return None
-        for name, digest in state["files"].items():
-            if _sha256(output / name) != digest:
-                return None
-        return state
-    except (OSError, ValueError, KeyError, TypeError):
+    state = load_record(state_path, key)
+    if state is None or state.get("status") != "ok":
         return None
+    try:
+        intact = all(_sha256(output / name) == digest for name, digest in state["files"].items())
+    except (OSError, KeyError, TypeError, AttributeError):
+        return None
+    return state if intact else None
 
 
 def run_experiment(experiment: Experiment, output: Path, data: str | None, quick: bool, force: bool = False) -> dict:
@@ -96,8 +91,7 @@ def run_experiment(experiment: Experiment, output: Path, data: str | None, quick
         "numbers": common._plain(numbers),
         "seconds": round(time.perf_counter() - start, 2),
     }
-    with atomic_write(state_path, "w") as handle:
-        json.dump(state, handle)
+    save_record(state_path, state)
     return {**state, "cached": False}
 
 
