@@ -510,9 +510,7 @@ def _benchmark_matching(args) -> None:
     dataset = {"tosca": load_tosca, "scape": load_scape, "folder": load_folder}[kind](root)
     if not dataset.pairs():
         raise HamsaError(f"'{root}' has no evaluation pairs (each class needs at least two shapes)")
-    output = Path(args.output)
-    if not (output.parent if str(output.parent) else Path(".")).is_dir():
-        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
+    output = _output_path(args.output)
     table = benchmark_dataset(
         dataset,
         output,

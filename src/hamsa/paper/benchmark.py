@@ -42,7 +42,7 @@ from hamsa.cache import content_key, load_record, save_record
 from hamsa.datasets import Dataset, cached_eigenbasis
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.evaluation import THRESHOLDS, TruthDistances, error_curve, sample_points, summary
+from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 from hamsa.geodesic import geodesic_distance
 from hamsa.io import atomic_write
 from hamsa.matching import match, resolve_signs, resolve_signs_without_truth
@@ -433,18 +433,16 @@ def _write_outputs(output: Path, table: dict, records: list[dict], name: str) ->
         import matplotlib.pyplot as plt
     except ImportError:
         return  # the table is the result; the plot needs the [viz] extra
+    from hamsa.paper.experiments._common import kim_curve_panel, save_figure
+
     methods = [m for m in METHODS if m in records[0]["curves"]]
+    aucs = {(row["method"], row["basis"]): row["auc"] for row in table["rows"]}
     figure, axes = plt.subplots(1, len(methods), figsize=(4.2 * len(methods), 3.6), sharey=True, squeeze=False)
     for ax, method in zip(axes[0], methods):
-        for basis, style in zip(BASES, ("--", "-")):
-            curve = np.mean([r["curves"][method][basis] for r in records], axis=0)
-            ax.plot(THRESHOLDS, curve, style, label=basis)
-        ax.set_title(f"{method} — {name} ({len(records)} pairs)", fontsize=10)
-        ax.set_xlabel("geodesic error / sqrt(area)")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="lower right", fontsize=8)
+        curves = {basis: [record["curves"][method][basis] for record in records] for basis in BASES}
+        scores = {basis: aucs[method, basis] for basis in BASES}
+        kim_curve_panel(ax, curves, scores, f"{method} — {name} ({len(records)} pairs)")
     axes[0][0].set_ylabel("% correspondences")
     figure.tight_layout()
-    with atomic_write(output / "curves.png", "wb") as handle:
-        figure.savefig(handle, format="png", dpi=110)
+    save_figure(figure, output / "curves.png")
     plt.close(figure)

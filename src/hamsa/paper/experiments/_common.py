@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 import hamsa
+from hamsa.cache import save_record
 from hamsa.io import atomic_write
 
 
@@ -60,8 +60,7 @@ def _plain(value):
 
 
 def write_json(path: Path, numbers: dict) -> None:
-    with atomic_write(path, "w") as handle:
-        json.dump(_plain(numbers), handle, indent=2)
+    save_record(path, _plain(numbers), indent=2)
 
 
 class Timer:
