@@ -3,7 +3,7 @@
 Both minimize the same area-weighted objective tr(Phi^T W Phi) + mu sum a |Phi| with Phi^T A Phi = I
 and stop on the same relative change of the objective (1e-6). Mesh: the 14k-vertex hand of
 ../shared/data/classic (or the 6k one, or a built-in capsule of ~10k vertices without the data), scaled
-to unit area; K = 20, mu = 100. Prints both times (median of --repeat), the ratio admm / hamiltonian,
+to unit area; k = 20, mu = 100. Prints both times (median of --repeat), the ratio admm / hamiltonian,
 both objectives and their ratio. Bar (issue 5): ratio >= 3 with the Hamiltonian objective at most 5% above.
 """
 

@@ -34,7 +34,7 @@ from hamsa.mesh import TriMesh
 from hamsa.operators import hamiltonian, mass_matrix, stiffness_matrix
 from hamsa.optimize import optimize_potential
 
-__version__ = "0.1.8"
+__version__ = "0.2.0"
 
 __all__ = [
     "Eigenbasis",
