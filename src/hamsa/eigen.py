@@ -502,20 +502,11 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     guard = max(8, k // 5)
     wanted = min(k + guard, n)
     # Small blocks keep the Krylov polynomial degree high per solve (fewest solves); the basis holds
-    # three times the wanted pairs before a thick restart. Measured on a 50k sphere, k = 100:
-    # block 8 -> 424 solves, 16 -> 592, 32 -> 1056.
+    # three times the wanted pairs before a thick restart (on a 50k sphere, k = 100: block 8 -> 424 solves,
+    # 16 -> 592, 32 -> 1056).
     block = min(max(8, k // 12), 32, n)
     rng = np.random.default_rng(12345)
-    start = rng.standard_normal((n, block))
-    if initial is not None:
-        # A wide start block would make every Krylov block as wide (measured on 50k vertices, k = 100:
-        # 4x slower than cold). Random combinations of the start vectors keep the block narrow and the
-        # start rich in the wanted eigenvectors and poor in the others.
-        initial = np.asarray(initial, dtype=np.float64).reshape(n, -1)
-        if initial.shape[1] > block:
-            initial = initial @ rng.standard_normal((initial.shape[1], block))
-        start = np.hstack([initial, start[:, : max(0, block - initial.shape[1])]])
-    first, _, _ = _orthonormalize(start, mass, 1e-8 * np.linalg.norm(start, axis=0).max())
+    first = _start_block(n, block, initial, rng, mass)
     width = first.shape[1]
     # room for the kept Ritz vectors, the frontier and its expansion (blocks never shrink the relation)
     capacity = min(n, max(wanted + 5 * width, 3 * wanted))
@@ -537,45 +528,17 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
     solves, cycles = 0, 1
     since_check, check_every = 0, max(1, wanted // (4 * block))
     while True:
-        frontier = Q[:, f0:f1]
-        Z = factor.solve(mass(frontier))
+        Qn, AQn = _extend(factor, Q, AQ, T, f0, f1, capacity, block, mass, local, rng)
         solves += f1 - f0
-        floor = 1e-13 * np.sqrt(np.einsum("ij,ij->j", Z, mass(Z))).max()
-        Z, coefficients = _orthogonalize(Z, Q[:, :f1], _columns(AQ, f1), mass, local)
-        T[:f1, f0:f1] = coefficients
-        T[f0:f1, :f1] = coefficients.T
-        T[f0:f1, f0:f1] = (coefficients[f0:f1] + coefficients[f0:f1].T) / 2
-        room = capacity - f1
-        Qn, AQn, B = _orthonormalize(Z, mass, floor)
-        if Qn.shape[1] > room:  # only when the basis is the whole space (capacity == n): S Q is in span(Q)
-            Qn, AQn, B = Qn[:, :0], AQn[:, :0], B[:0]
-        if Qn.shape[1] == 0 and room > 0:  # an invariant subspace: continue from fresh random directions
-            Z, _ = _orthogonalize(rng.standard_normal((n, min(block, room))), Q[:, :f1], _columns(AQ, f1), mass)
-            Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
-            B = np.zeros((Qn.shape[1], f1 - f0))
         bn = Qn.shape[1]
-        T[f1 : f1 + bn, f0:f1] = B
-        T[f0:f1, f1 : f1 + bn] = B.T
         since_check += 1
         restart = f1 + 2 * bn > capacity or bn == 0
         # Rayleigh-Ritz on the closed part, every few blocks (an eigh of T per block would cost more
         # than the solves) and before every restart
         if restart or (f1 >= wanted and since_check >= check_every):
             since_check = 0
-            theta, Y = np.linalg.eigh(T[:f1, :f1])
-            theta, Y = theta[::-1], Y[:, ::-1]  # dominant first = smallest E first
-            m = min(wanted, f1)
-            W = T[f1 : f1 + bn, :f1] @ Y[:, :m]  # (bn, m): S x_i - theta_i x_i = Qn W[:, i]
-            if bn:
-                KQn = H @ Qn - shift * AQn
-                gram = KQn.T @ (KQn * mass.inverse_diagonal[:, None])
-                residual_norm = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, gram @ W), 0.0)) / np.abs(theta[:m])
-            else:
-                residual_norm = np.zeros(m)
-            E = shift + 1.0 / theta[:m]
-            scale = np.maximum(np.abs(E), 1e-2 * np.abs(E[min(k, m) - 1]))
-            residual = residual_norm / scale
-            if m >= k and np.all(residual[:k] <= tol):
+            theta, Y, W, E, residual = _ritz(H, T, f1, bn, min(wanted, f1), k, Qn, AQn, shift, mass)
+            if len(E) >= k and np.all(residual[:k] <= tol):
                 X = Q[:, :f1] @ Y[:, :k]
                 return E[:k], X, SolveInfo("krylov", cycles, solves, float(residual[:k].max()), shift=shift)
         if restart:  # thick restart: keep the best `wanted` Ritz vectors
@@ -585,15 +548,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
                     f"eigensolver did not converge in {max_cycles} restarts: largest relative residual "
                     f"{residual[:k].max():.2e} > tol {tol:.1e}"
                 )
-            p = m
-            Q[:, :p] = Q[:, :f1] @ Y[:, :p]
-            if AQ is not None:
-                AQ[:, :p] = AQ[:, :f1] @ Y[:, :p]
-            T[:] = 0.0
-            T[np.arange(p), np.arange(p)] = theta[:p]
-            T[p : p + bn, :p] = W
-            T[:p, p : p + bn] = W.T
-            f0, f1 = p, p + bn
+            f0, f1 = _thick_restart(Q, AQ, T, f1, bn, theta, Y, W)
             local = 0  # the new frontier's image has components on every kept Ritz vector
         else:
             local = f0
@@ -601,6 +556,79 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
         Q[:, f0:f1] = Qn
         if AQ is not None:
             AQ[:, f0:f1] = AQn
+
+
+def _start_block(n: int, block: int, initial, rng, mass) -> np.ndarray:
+    """The A-orthonormal first Krylov block: random, or random combinations of ``initial`` (n, p).
+
+    A wide start block would make every Krylov block as wide (4x slower than cold at 50k vertices,
+    k = 100); random combinations of the start vectors keep the block narrow and the start rich in the
+    wanted eigenvectors and poor in the others.
+    """
+    start = rng.standard_normal((n, block))
+    if initial is not None:
+        initial = np.asarray(initial, dtype=np.float64).reshape(n, -1)
+        if initial.shape[1] > block:
+            initial = initial @ rng.standard_normal((initial.shape[1], block))
+        start = np.hstack([initial, start[:, : max(0, block - initial.shape[1])]])
+    first, _, _ = _orthonormalize(start, mass, 1e-8 * np.linalg.norm(start, axis=0).max())
+    return first
+
+
+def _extend(factor, Q, AQ, T, f0, f1, capacity, block, mass, local, rng):
+    """One block Krylov step: ``Z = S Q_frontier``, orthogonalized against Q[:, :f1] (coefficients into T's
+    frontier columns and rows); returns the A-orthonormal new block (Qn, A Qn), its coupling B written into
+    T below the frontier. An invariant subspace continues from fresh random directions."""
+    n = Q.shape[0]
+    Z = factor.solve(mass(Q[:, f0:f1]))
+    floor = 1e-13 * np.sqrt(np.einsum("ij,ij->j", Z, mass(Z))).max()
+    Z, coefficients = _orthogonalize(Z, Q[:, :f1], _columns(AQ, f1), mass, local)
+    T[:f1, f0:f1] = coefficients
+    T[f0:f1, :f1] = coefficients.T
+    T[f0:f1, f0:f1] = (coefficients[f0:f1] + coefficients[f0:f1].T) / 2
+    room = capacity - f1
+    Qn, AQn, B = _orthonormalize(Z, mass, floor)
+    if Qn.shape[1] > room:  # only when the basis is the whole space (capacity == n): S Q is in span(Q)
+        Qn, AQn, B = Qn[:, :0], AQn[:, :0], B[:0]
+    if Qn.shape[1] == 0 and room > 0:  # an invariant subspace: continue from fresh random directions
+        Z, _ = _orthogonalize(rng.standard_normal((n, min(block, room))), Q[:, :f1], _columns(AQ, f1), mass)
+        Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
+        B = np.zeros((Qn.shape[1], f1 - f0))
+    bn = Qn.shape[1]
+    T[f1 : f1 + bn, f0:f1] = B
+    T[f0:f1, f1 : f1 + bn] = B.T
+    return Qn, AQn
+
+
+def _ritz(H, T, f1, bn, m, k, Qn, AQn, shift, mass):
+    """Rayleigh-Ritz on the closed part T[:f1, :f1]: (theta, Y) dominant first, W (bn, m) with
+    ``S x_i - theta_i x_i = Qn W[:, i]``, the pencil's eigenvalues E (m,) and their relative residuals."""
+    theta, Y = np.linalg.eigh(T[:f1, :f1])
+    theta, Y = theta[::-1], Y[:, ::-1]  # dominant first = smallest E first
+    W = T[f1 : f1 + bn, :f1] @ Y[:, :m]
+    if bn:
+        KQn = H @ Qn - shift * AQn
+        gram = KQn.T @ (KQn * mass.inverse_diagonal[:, None])
+        residual_norm = np.sqrt(np.maximum(np.einsum("ij,ij->j", W, gram @ W), 0.0)) / np.abs(theta[:m])
+    else:
+        residual_norm = np.zeros(m)
+    E = shift + 1.0 / theta[:m]
+    scale = np.maximum(np.abs(E), 1e-2 * np.abs(E[min(k, m) - 1]))
+    return theta, Y, W, E, residual_norm / scale
+
+
+def _thick_restart(Q, AQ, T, f1, bn, theta, Y, W) -> tuple[int, int]:
+    """Keep the p = W.shape[1] best Ritz vectors as the new closed part (T diagonal there, coupled to the
+    pending block by W); returns the new frontier columns (p, p + bn)."""
+    p = W.shape[1]
+    Q[:, :p] = Q[:, :f1] @ Y[:, :p]
+    if AQ is not None:
+        AQ[:, :p] = AQ[:, :f1] @ Y[:, :p]
+    T[:] = 0.0
+    T[np.arange(p), np.arange(p)] = theta[:p]
+    T[p : p + bn, :p] = W
+    T[:p, p : p + bn] = W.T
+    return p, p + bn
 
 
 class HamiltonianEigensolver:
