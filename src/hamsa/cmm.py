@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import scipy.linalg as sla
@@ -155,17 +156,34 @@ def compressed_modes(
         modes, iterations, history = _admm_modes(
             W, A, weights, lbo.vectors, float(lbo.values[-1]), mu, tol, max_iterations * 50, callback
         )
-        gram = modes.T @ (areas[:, None] * modes)
-        return CompressedModes(
-            modes,
-            mode_objective(W, weights, modes, mu),
-            float(np.abs(gram - np.eye(k)).max()),
-            iterations,
-            time.perf_counter() - start,
-            mu,
-            history,
-        )
+        return _result(W, areas, weights, modes, mu, iterations, history, start)
     beta = 1e8 * max(float(lbo.values[-1]), 1.0) if beta is None else float(beta)
+    irls = partial(_irls_mode, W, areas, weights, mu, tol=tol, max_iterations=max_iterations, epsilon=epsilon,
+                   inverse_steps=inverse_steps)  # fmt: skip
+    modes, iterations, history, factor = _greedy_modes(irls, lbo.vectors, areas, beta, seed, callback)
+    if refine and k > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
+        _rotate_to_lower_l1(modes, weights)
+        _refine_modes(irls, modes, areas, beta, factor, iterations, history, callback)
+    return _result(W, areas, weights, modes, mu, iterations, history, start)
+
+
+def _result(W, areas, weights, modes, mu, iterations, history, start) -> CompressedModes:
+    gram = modes.T @ (areas[:, None] * modes)
+    return CompressedModes(
+        modes=modes,
+        objective=mode_objective(W, weights, modes, mu),
+        orthogonality_error=float(np.abs(gram - np.eye(modes.shape[1])).max()),
+        iterations=iterations,
+        seconds=time.perf_counter() - start,
+        mu=mu,
+        history=history,
+    )
+
+
+def _greedy_modes(irls, lbo_vectors, areas, beta, seed, callback):
+    """The modes one by one, each A-orthogonal to the earlier ones (pushed away by the low-rank term
+    ``beta (A Phi)(A Phi)^T``): (modes (n, k), IRLS iterations, histories, the reusable factorization)."""
+    n, k = lbo_vectors.shape
     modes = np.zeros((n, k))
     rng = np.random.default_rng(seed)
     factor = None
@@ -174,43 +192,32 @@ def compressed_modes(
         previous = modes[:, :i]
         # the LBO eigenvector, slightly perturbed: the constant mode is a fixed point of the reweighting
         # (|phi| constant gives a constant V) though not a minimizer, so start off it
-        start_vector = lbo.vectors[:, i] + 0.1 * rng.standard_normal(n)
+        start_vector = lbo_vectors[:, i] + 0.1 * rng.standard_normal(n)
         phi = _a_normalize(_a_orthogonalize(start_vector, previous, areas), areas)
         U = np.sqrt(beta) * (areas[:, None] * previous)
-        phi, iteration, trace, majorized, factor = _irls_mode(
-            W, areas, weights, mu, phi, previous, U, factor, tol, max_iterations, epsilon, inverse_steps,
-            f"mode {i + 1}",
-        )  # fmt: skip
+        phi, iteration, trace, majorized, factor = irls(phi, previous, U, factor, label=f"mode {i + 1}")
         modes[:, i] = phi
         iterations.append(iteration)
         history.append({"objective": trace, "majorized": majorized})
         if callback is not None:
             callback("greedy", i, iteration, trace[-1])
-    if refine and k > 1 and mu > 0:  # (with mu = 0 the greedy modes are eigenvectors: nothing to gain)
-        _rotate_to_lower_l1(modes, weights)
-        for i in range(k):
-            others = np.delete(modes, i, axis=1)
-            U = np.sqrt(beta) * (areas[:, None] * others)
-            phi, iteration, trace, majorized, factor = _irls_mode(
-                W, areas, weights, mu, modes[:, i], others, U, factor, tol, max_iterations, epsilon, inverse_steps,
-                f"mode {i + 1} (refinement)", floor_start=1e-3,
-            )  # fmt: skip
-            modes[:, i] = phi
-            iterations[i] += iteration
-            history[i]["objective"] += trace[1:]
-            history[i]["majorized"] += majorized
-            if callback is not None:
-                callback("refinement", i, iteration, trace[-1])
-    gram = modes.T @ (areas[:, None] * modes)
-    return CompressedModes(
-        modes=modes,
-        objective=mode_objective(W, weights, modes, mu),
-        orthogonality_error=float(np.abs(gram - np.eye(k)).max()),
-        iterations=iterations,
-        seconds=time.perf_counter() - start,
-        mu=mu,
-        history=history,
-    )
+    return modes, iterations, history, factor
+
+
+def _refine_modes(irls, modes, areas, beta, factor, iterations, history, callback) -> None:
+    """One more warm-started IRLS pass, in place, each mode A-orthogonal to all the others."""
+    for i in range(modes.shape[1]):
+        others = np.delete(modes, i, axis=1)
+        U = np.sqrt(beta) * (areas[:, None] * others)
+        phi, iteration, trace, majorized, factor = irls(
+            modes[:, i], others, U, factor, label=f"mode {i + 1} (refinement)", floor_start=1e-3
+        )
+        modes[:, i] = phi
+        iterations[i] += iteration
+        history[i]["objective"] += trace[1:]
+        history[i]["majorized"] += majorized
+        if callback is not None:
+            callback("refinement", i, iteration, trace[-1])
 
 
 def _irls_mode(
