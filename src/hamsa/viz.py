@@ -94,47 +94,26 @@ def render_fields(
         border=False,
     )
     overall = max(np.nanmax(np.abs(f)) for f in fields)
-    low_all, high_all = min(np.nanmin(f) for f in fields), max(np.nanmax(f) for f in fields)
+    everything = (min(np.nanmin(f) for f in fields), max(np.nanmax(f) for f in fields))
     for index, (mesh_i, field, title) in enumerate(zip(meshes, fields, titles)):
         poly = to_polydata(mesh_i)
         if field.shape != (poly.n_points,):
             raise HamsaError(f"field {index} has shape {field.shape}, its mesh has {poly.n_points} vertices")
-        if symmetric:
-            bound = overall if shared_range else np.nanmax(np.abs(field))
-            clim = (-bound, bound)
-        else:
-            clim = (low_all, high_all) if shared_range else (np.nanmin(field), np.nanmax(field))
-        if clim[0] == clim[1]:
-            clim = (clim[0] - 1.0, clim[1] + 1.0)
         poly.point_data["value"] = field
         plotter.subplot(index // columns, index % columns)
         plotter.add_mesh(
             poly,
             scalars="value",
             cmap=cmap,
-            clim=clim,
+            clim=_color_range(
+                field, symmetric, overall if shared_range else None, everything if shared_range else None
+            ),
             smooth_shading=True,
-            scalar_bar_args={
-                "title": " " * index,
-                "n_labels": 3,
-                "fmt": "%.2g",
-                "height": 0.08,
-                "width": 0.6,
-                "position_x": 0.2,
-                "position_y": 0.02,
-                "label_font_size": 11,
-            },
+            scalar_bar_args=dict(_SCALAR_BAR, title=" " * index),
         )
         plotter.add_text(title, position="upper_edge", font_size=9, color="black")
         plotter.set_background("white")
-        if not isinstance(view, str):
-            _directed_view(plotter, poly.points, *np.asarray(view, dtype=np.float64))
-        elif view == "auto":
-            _principal_view(plotter, poly.points)
-        elif view == "iso":
-            plotter.view_isometric()
-        else:
-            getattr(plotter, f"view_{view}")()
+        _set_view(plotter, poly.points, view)
         plotter.camera.zoom(zoom)
     try:
         image = plotter.screenshot(None, return_img=True)
@@ -147,6 +126,38 @@ def render_fields(
     with atomic_write(path, "wb") as handle:
         Image.fromarray(image).save(handle, format="PNG")
     return image
+
+
+_SCALAR_BAR = {
+    "n_labels": 3,
+    "fmt": "%.2g",
+    "height": 0.08,
+    "width": 0.6,
+    "position_x": 0.2,
+    "position_y": 0.02,
+    "label_font_size": 11,
+}
+
+
+def _color_range(field: np.ndarray, symmetric: bool, shared_bound=None, shared_range=None) -> tuple:
+    """The colour limits of one panel: symmetric about 0 or the field's range, or the shared ones."""
+    if symmetric:
+        bound = np.nanmax(np.abs(field)) if shared_bound is None else shared_bound
+        clim = (-bound, bound)
+    else:
+        clim = (np.nanmin(field), np.nanmax(field)) if shared_range is None else shared_range
+    return (clim[0] - 1.0, clim[1] + 1.0) if clim[0] == clim[1] else clim
+
+
+def _set_view(plotter, points: np.ndarray, view) -> None:
+    if not isinstance(view, str):
+        _directed_view(plotter, points, *np.asarray(view, dtype=np.float64))
+    elif view == "auto":
+        _principal_view(plotter, points)
+    elif view == "iso":
+        plotter.view_isometric()
+    else:
+        getattr(plotter, f"view_{view}")()
 
 
 def _principal_view(plotter, points: np.ndarray) -> None:
