@@ -104,9 +104,7 @@ def chebyshev_eigsh(
     if not 1 <= k <= m:
         raise SolverError(f"k = {k} eigenpairs requested, must be between 1 and the number of vertices n = {n}")
     scale = 1.0 / np.sqrt(mass_diagonal)
-    M = sp.csr_matrix(H, dtype=np.float64, copy=True)
-    M.data *= scale[np.repeat(np.arange(n), np.diff(M.indptr))] * scale[M.indices]  # A^-1/2 H A^-1/2
-    upper = float(np.add.reduceat(np.abs(M.data), M.indptr[:-1]).max())  # Gershgorin: >= the top eigenvalue
+    M, upper = _symmetric_operator(H, scale)
     if device == "cuda":
         M = xsp.csr_matrix(M)
 
@@ -120,14 +118,7 @@ def chebyshev_eigsh(
         X = xp.ascontiguousarray(X)  # row-major blocks: each row of X is read whole by the GPU kernel
         MX = _multiply(M, X)
         products += 1
-        gram = X.T @ MX
-        theta, Y = xp.linalg.eigh((gram + gram.T) / 2)
-        X, MX = X @ Y, MX @ Y
-        residual = xp.linalg.norm(MX[:, :k] - X[:, :k] * theta[:k], axis=0)
-        theta_host = xp.asnumpy(theta) if device == "cuda" else theta
-        residual_host = xp.asnumpy(residual) if device == "cuda" else residual
-        size = np.maximum(np.abs(theta_host[:k]), 1e-2 * abs(theta_host[k - 1]))
-        relative = residual_host / np.maximum(size, 1e-300)
+        X, MX, theta_host, relative = _rayleigh_ritz(xp, X, MX, k, device)
         if np.all(relative <= tol):
             break
         iterations += 1
@@ -156,6 +147,26 @@ def chebyshev_eigsh(
     if return_block:
         info["ritz_block"] = block
     return np.asarray(theta_host[:k], dtype=np.float64), np.asarray(vectors), info
+
+
+def _symmetric_operator(H, scale: np.ndarray):
+    """``M = A^-1/2 H A^-1/2`` (a CSR copy; ``scale`` = a^-1/2) and a Gershgorin bound >= its top eigenvalue."""
+    M = sp.csr_matrix(H, dtype=np.float64, copy=True)
+    M.data *= scale[np.repeat(np.arange(M.shape[0]), np.diff(M.indptr))] * scale[M.indices]
+    return M, float(np.add.reduceat(np.abs(M.data), M.indptr[:-1]).max())
+
+
+def _rayleigh_ritz(xp, X, MX, k: int, device: str):
+    """Rotate the orthonormal block X (and MX = M X) to its Ritz vectors: (X, MX, Ritz values on the host,
+    relative residuals of the first k on the host)."""
+    gram = X.T @ MX
+    theta, Y = xp.linalg.eigh((gram + gram.T) / 2)
+    X, MX = X @ Y, MX @ Y
+    residual = xp.linalg.norm(MX[:, :k] - X[:, :k] * theta[:k], axis=0)
+    theta_host = xp.asnumpy(theta) if device == "cuda" else theta
+    residual_host = xp.asnumpy(residual) if device == "cuda" else residual
+    size = np.maximum(np.abs(theta_host[:k]), 1e-2 * abs(theta_host[k - 1]))
+    return X, MX, theta_host, residual_host / np.maximum(size, 1e-300)
 
 
 def _filter_degree(lowest: float, cut: float, upper: float, wanted: np.ndarray, excess: np.ndarray) -> int:
