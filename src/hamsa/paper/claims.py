@@ -114,12 +114,16 @@ def _t13(n):
     )
 
 
-def _t14_descriptors(n):
-    hks = n["methods"]["hks"]
-    return hks["hamiltonian"]["auc"] >= hks["lbo"]["auc"], (
-        f"{n['dataset']}, HKS nearest neighbours, mean AUC on [0, 0.25]: LBO {hks['lbo']['auc']:.3f} → "
-        f"Hamiltonian {hks['hamiltonian']['auc']:.3f}"
+def _hamiltonian_auc_at_least_lbo(n, method: str, what: str, hamiltonian: str = "Hamiltonian"):
+    scores = n["methods"][method]
+    return scores["hamiltonian"]["auc"] >= scores["lbo"]["auc"], (
+        f"{n['dataset']}, {what}, mean AUC on [0, 0.25]: LBO {scores['lbo']['auc']:.3f} → "
+        f"{hamiltonian} {scores['hamiltonian']['auc']:.3f}"
     )
+
+
+def _t14_descriptors(n):
+    return _hamiltonian_auc_at_least_lbo(n, "hks", "HKS nearest neighbours")
 
 
 def _t14_diagonal(n):
@@ -141,10 +145,8 @@ def _t14_texture(n):
 
 
 def _t14_icskm(n):
-    m = n["methods"]["icskm"]
-    return m["hamiltonian"]["auc"] >= m["lbo"]["auc"], (
-        f"{n['dataset']}, ICSKM from 3 ground-truth landmarks, mean AUC: LBO {m['lbo']['auc']:.3f} → "
-        f"H (V = geodesic distance from the landmarks) {m['hamiltonian']['auc']:.3f}"
+    return _hamiltonian_auc_at_least_lbo(
+        n, "icskm", "ICSKM from 3 ground-truth landmarks", "H (V = geodesic distance from the landmarks)"
     )
 
 

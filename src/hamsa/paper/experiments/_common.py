@@ -89,3 +89,13 @@ def kim_curve_panel(ax, curves: dict, aucs: dict, title: str, labels: dict | Non
     ax.set_xlabel("geodesic error / sqrt(area)")
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
+
+
+def print_method_scores(figure: str, result: dict, hamiltonian: str = "Hamiltonian") -> None:
+    """One line per matching method of an experiment's result: AUC and mean error, LBO vs Hamiltonian."""
+    for method, by_basis in result["methods"].items():
+        lbo, ham = by_basis["lbo"], by_basis["hamiltonian"]
+        print(
+            f"{figure} {method} ({result['dataset']}): AUC LBO {lbo['auc']:.3f} vs {hamiltonian} {ham['auc']:.3f}; "
+            f"mean error {lbo['mean_error']:.4f} vs {ham['mean_error']:.4f}"
+        )

@@ -34,7 +34,7 @@ from hamsa import potentials, shapes
 from hamsa.matching import functional_from_map, offdiagonal_energy
 from hamsa.paper.benchmark import BASES, SCORES, evaluate_pair, summarize
 
-from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
 METHODS = ("hks", "wks", "fmap", "icskm", "sgfe")
 
@@ -127,11 +127,6 @@ def _plot_maps(path, C_lbo, C_h, energy, names):
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    for method, by_basis in r["methods"].items():
-        print(
-            f"fig10 {method} ({r['dataset']}): AUC LBO {by_basis['lbo']['auc']:.3f} vs "
-            f"Hamiltonian {by_basis['hamiltonian']['auc']:.3f}; mean error {by_basis['lbo']['mean_error']:.4f} vs "
-            f"{by_basis['hamiltonian']['mean_error']:.4f}"
-        )
+    print_method_scores("fig10", r)
     e = r["offdiagonal_energy"]
     print(f"fig10 |C| off-diagonal energy: LBO {e['lbo']:.3f} vs Hamiltonian {e['hamiltonian']:.3f} ({r['seconds']} s)")

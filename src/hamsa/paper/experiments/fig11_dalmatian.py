@@ -26,7 +26,7 @@ from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 from hamsa.paper.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, match_pair
 
-from ._common import Timer, data_file, kim_curve_panel, parse_args, save_figure, write_json
+from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
 MU = TEXTURE_MU
 METHODS = ("hks", "wks")
@@ -124,8 +124,5 @@ def _plot(path, source, luminance, curves, mean, dataset):
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    for method, by_basis in r["methods"].items():
-        print(
-            f"fig11 {method} ({r['dataset']}): AUC LBO {by_basis['lbo']['auc']:.3f} vs texture Hamiltonian "
-            f"{by_basis['hamiltonian']['auc']:.3f} ({r['seconds']} s)"
-        )
+    print_method_scores("fig11", r, "texture Hamiltonian")
+    print(f"fig11: {r['seconds']} s")
