@@ -228,7 +228,7 @@ def dataset_pairs(dataset: Dataset, limit: int | None = None) -> list[tuple[str,
     return chosen
 
 
-def _identity_truth(source_kept: np.ndarray, target_kept: np.ndarray, n_target_original: int) -> np.ndarray:
+def identity_truth(source_kept: np.ndarray, target_kept: np.ndarray, n_target_original: int) -> np.ndarray:
     """Identity ground truth in original ids, carried through the vertices each side kept (-1: dropped)."""
     position = np.full(max(n_target_original, int(source_kept.max()) + 1), -1, dtype=np.int64)
     position[target_kept] = np.arange(len(target_kept))
@@ -239,7 +239,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
     source, source_kept = dataset.load(source_name, largest_component=True)  # (as Kim et al.: loose pieces
     target, target_kept = dataset.load(target_name, largest_component=True)  # dropped; TOSCA's gorilla)
     source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
-    truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
     result = evaluate_pair(
         source,
         target,

@@ -88,7 +88,7 @@ def run_experiment(experiment: Experiment, output: Path, data: str | None, quick
         "status": "ok",
         "key": key,
         "files": files,
-        "numbers": common._plain(numbers),
+        "numbers": common.plain(numbers),
         "seconds": round(time.perf_counter() - start, 2),
     }
     save_record(state_path, state)

@@ -47,20 +47,20 @@ def builtin_humanoid(args, pose: str = "rest") -> hamsa.TriMesh:
     return hamsa.shapes.humanoid(pose, spacing=0.035 if args.quick else 0.02).scaled_to_unit_area()
 
 
-def _plain(value):
+def plain(value):
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
+        return plain(value.tolist())
     if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
     return value
 
 
 def write_json(path: Path, numbers: dict) -> None:
-    save_record(path, _plain(numbers), indent=2)
+    save_record(path, plain(numbers), indent=2)
 
 
 class Timer:

@@ -24,7 +24,7 @@ import hamsa
 from hamsa import potentials, shapes, viz
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
-from hamsa.paper.benchmark import TEXTURE_MU, _identity_truth, carried_to_target, match_pair
+from hamsa.paper.benchmark import TEXTURE_MU, identity_truth, carried_to_target, match_pair
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
@@ -42,7 +42,7 @@ def _pairs(args):
             if dataset.classes[source_name] != "dog":
                 continue
             (source, source_kept), (target, target_kept) = dataset.load(source_name), dataset.load(target_name)
-            truth = _identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+            truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
             pairs.append((source_name, target_name, source.scaled_to_unit_area(), target.scaled_to_unit_area(), truth))
         return "TOSCA dogs", pairs
     spacing = 0.035 if args.quick else 0.02
