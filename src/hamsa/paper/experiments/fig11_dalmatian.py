@@ -24,7 +24,7 @@ import hamsa
 from hamsa import potentials, shapes, viz
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
-from hamsa.paper.benchmark import TEXTURE_MU, identity_truth, carried_to_target, match_pair
+from hamsa.paper.benchmark import TEXTURE_MU, carried_to_target, identity_truth, match_pair
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
