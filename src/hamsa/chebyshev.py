@@ -65,6 +65,7 @@ def chebyshev_eigsh(
     max_iterations: int = 300,
     seed: int = 12345,
     return_block: bool = False,
+    spectral_scale: float = 0.0,
 ):
     """The k smallest eigenpairs of ``H psi = E diag(a) psi`` by Chebyshev-filtered subspace iteration.
 
@@ -85,6 +86,9 @@ def chebyshev_eigsh(
         guard vectors restart random and the first filter is aimed at a far too wide interval.
     guard : int, optional
         Extra vectors in the block (default max(10, k // 4)): more converge faster near the k-th.
+    spectral_scale : float
+        A typical eigenvalue spacing: the floor of the residual scale (:func:`residual_floor`), needed when
+        the k eigenvalues are all ~0 (k or more connected components).
 
     Returns
     -------
@@ -118,7 +122,7 @@ def chebyshev_eigsh(
         X = xp.ascontiguousarray(X)  # row-major blocks: each row of X is read whole by the GPU kernel
         MX = _multiply(M, X)
         products += 1
-        X, MX, theta_host, relative = _rayleigh_ritz(xp, X, MX, k, device)
+        X, MX, theta_host, relative = _rayleigh_ritz(xp, X, MX, k, device, spectral_scale)
         if np.all(relative <= tol):
             break
         iterations += 1
@@ -156,7 +160,16 @@ def _symmetric_operator(H, scale: np.ndarray):
     return M, float(np.add.reduceat(np.abs(M.data), M.indptr[:-1]).max())
 
 
-def _rayleigh_ritz(xp, X, MX, k: int, device: str):
+def residual_floor(values: np.ndarray, spectral_scale: float = 0.0) -> float:
+    """The smallest scale residuals are measured against, for the k wanted eigenvalues ``values`` ascending:
+    an eigenpair's relative residual is ``|H x - E A x| / max(|E|, floor)`` with
+    ``floor = 1e-2 max(|E_{k-1}|, spectral_scale)``. Without ``spectral_scale`` (a typical eigenvalue
+    spacing, 4 pi / area on a surface) the floor vanishes when all k eigenvalues are ~0, as on a mesh of k
+    or more connected components, and no residual could meet a tolerance."""
+    return max(1e-2 * max(abs(float(values[-1])), float(spectral_scale)), 1e-300)
+
+
+def _rayleigh_ritz(xp, X, MX, k: int, device: str, spectral_scale: float):
     """Rotate the orthonormal block X (and MX = M X) to its Ritz vectors: (X, MX, Ritz values on the host,
     relative residuals of the first k on the host)."""
     gram = X.T @ MX
@@ -165,8 +178,12 @@ def _rayleigh_ritz(xp, X, MX, k: int, device: str):
     residual = xp.linalg.norm(MX[:, :k] - X[:, :k] * theta[:k], axis=0)
     theta_host = xp.asnumpy(theta) if device == "cuda" else theta
     residual_host = xp.asnumpy(residual) if device == "cuda" else residual
-    size = np.maximum(np.abs(theta_host[:k]), 1e-2 * abs(theta_host[k - 1]))
-    return X, MX, theta_host, residual_host / np.maximum(size, 1e-300)
+    return (
+        X,
+        MX,
+        theta_host,
+        residual_host / np.maximum(np.abs(theta_host[:k]), residual_floor(theta_host[:k], spectral_scale)),
+    )
 
 
 def _filter_degree(lowest: float, cut: float, upper: float, wanted: np.ndarray, excess: np.ndarray) -> int:

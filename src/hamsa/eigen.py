@@ -42,7 +42,9 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
+from hamsa.chebyshev import residual_floor
 from hamsa.errors import HamsaError, SolverError
 from hamsa.factorization import CholeskySolver
 from hamsa.mesh import as_trimesh
@@ -350,10 +352,17 @@ def generalized_eigsh(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if device == "cuda" and method not in ("auto", "chebyshev"):
         raise SolverError(f"method {method!r} runs on the CPU; on device='cuda' use method='chebyshev' (or 'auto')")
+    count, labels = connected_components(abs(H) + abs(A), directed=False)
+    if count > 1:
+        options = dict(lower_bound=lower_bound, method=method, tol=tol, backend=backend, max_cycles=max_cycles,
+                       device=device)  # fmt: skip
+        return _by_components(H, A, k, labels, initial, options)
     method = _resolve_method(method, device, n, k)
+    if spectral_scale is None:
+        spectral_scale = float(H.diagonal().mean() / A.diagonal().mean()) / n
     start = time.perf_counter()
     if method == "chebyshev":
-        values, vectors, info, _ = _chebyshev(H, A, k, tol, device, initial)
+        values, vectors, info, _ = _chebyshev(H, A, k, tol, device, initial, spectral_scale)
     elif method == "dense":
         if n > _DENSE_LIMIT_N:
             raise SolverError(
@@ -364,18 +373,56 @@ def generalized_eigsh(
         values, vectors = sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
         info = SolveInfo(method="dense")
     else:
-        if spectral_scale is None:
-            spectral_scale = float(H.diagonal().mean() / A.diagonal().mean()) / n
-        shift = lower_bound - spectral_scale
         values, vectors, info = _block_krylov(
-            H, A, k, shift=shift, tol=tol, backend=backend, initial=initial, factor=factor, max_cycles=max_cycles
-        )
+            H, A, k, shift=lower_bound - spectral_scale, tol=tol, backend=backend, initial=initial, factor=factor,
+            max_cycles=max_cycles, spectral_scale=spectral_scale,
+        )  # fmt: skip
     fix_signs(vectors)
     return (
         values,
         vectors,
         SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start, info.shift),
     )
+
+
+def _by_components(H, A, k: int, labels: np.ndarray, initial, options: dict):
+    """The k smallest eigenpairs of a pencil that decouples into the pieces ``labels`` (n,): each piece
+    solved on its own for min(k, its size) pairs, and the k smallest of all of them kept.
+
+    A pencil of c pieces has c copies of every eigenvalue the pieces share (c zero modes for the LBO), and a
+    Krylov space grown from a block of b vectors holds at most b copies of an eigenvalue: with c > b it
+    would miss some, and no residual test notices. Solved per piece, every eigenvalue is simple or a
+    multiplet of the piece itself.
+    """
+    n = H.shape[0]
+    H, A = sp.csr_matrix(H), sp.csr_matrix(A)
+    start = time.perf_counter()
+    found = []  # (values, vectors, rows, info) per piece
+    for piece in range(labels.max() + 1):
+        rows = np.flatnonzero(labels == piece)
+        wanted = min(k, len(rows))
+        method = options["method"] if 3 * wanted < len(rows) and len(rows) > _DENSE_MAX_N else "dense"
+        local = None if initial is None else np.asarray(initial).reshape(n, -1)[rows]
+        part = dict(options, method=method, device=options["device"] if method != "dense" else "cpu")
+        values, vectors, info = generalized_eigsh(H[rows][:, rows], A[rows][:, rows], wanted, initial=local, **part)
+        found.append((values, vectors, rows, info))
+    values = np.concatenate([f[0] for f in found])
+    order = np.argsort(values, kind="stable")[:k]
+    piece_of = np.concatenate([np.full(len(f[0]), i) for i, f in enumerate(found)])[order]
+    column_of = np.concatenate([np.arange(len(f[0])) for f in found])[order]
+    X = np.zeros((n, k))
+    for j, (piece, column) in enumerate(zip(piece_of, column_of)):
+        X[found[piece][2], j] = found[piece][1][:, column]
+    largest = max(found, key=lambda f: len(f[2]))[3]
+    info = SolveInfo(
+        largest.method,
+        max(f[3].cycles for f in found),
+        sum(f[3].solves for f in found),
+        max(f[3].max_residual for f in found),
+        time.perf_counter() - start,
+        largest.shift,
+    )
+    return values[order], X, info
 
 
 def _resolve_method(method: str, device: str, n: int, k: int) -> str:
@@ -386,7 +433,7 @@ def _resolve_method(method: str, device: str, n: int, k: int) -> str:
     return "chebyshev" if device == "cuda" else "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
 
 
-def _chebyshev(H, A, k, tol, device, initial, return_block=False):
+def _chebyshev(H, A, k, tol, device, initial, spectral_scale, return_block=False):
     """:func:`hamsa.chebyshev.chebyshev_eigsh` on a lumped mass: (values, vectors, SolveInfo, the whole Ritz
     block or None)."""
     from hamsa.chebyshev import chebyshev_eigsh
@@ -395,8 +442,9 @@ def _chebyshev(H, A, k, tol, device, initial, return_block=False):
     if not mass.is_diagonal:
         raise SolverError("method 'chebyshev' needs a lumped (diagonal) mass matrix; use 'krylov' for mass='full'")
     values, vectors, details = chebyshev_eigsh(
-        H, mass.diagonal, k, tol=tol, device=device, initial=initial, return_block=return_block
-    )
+        H, mass.diagonal, k, tol=tol, device=device, initial=initial, return_block=return_block,
+        spectral_scale=spectral_scale,
+    )  # fmt: skip
     info = SolveInfo(
         "chebyshev", details["iterations"], details["products"] * details["block"], details["max_residual"]
     )
@@ -483,7 +531,7 @@ def _columns(matrix, stop):
     return None if matrix is None else matrix[:, :stop]
 
 
-def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
+def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, spectral_scale):
     """Block Krylov-Schur for the dominant eigenpairs of S = (H - shift A)^-1 A in <.,.>_A.
 
     Invariant: Q = [closed | frontier] is A-orthonormal, ``S Q_closed = Q T[:, closed]`` exactly up to
@@ -537,7 +585,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles):
         # than the solves) and before every restart
         if restart or (f1 >= wanted and since_check >= check_every):
             since_check = 0
-            theta, Y, W, E, residual = _ritz(H, T, f1, bn, min(wanted, f1), k, Qn, AQn, shift, mass)
+            theta, Y, W, E, residual = _ritz(H, T, f1, bn, min(wanted, f1), k, Qn, AQn, shift, mass, spectral_scale)
             if len(E) >= k and np.all(residual[:k] <= tol):
                 X = Q[:, :f1] @ Y[:, :k]
                 return E[:k], X, SolveInfo("krylov", cycles, solves, float(residual[:k].max()), shift=shift)
@@ -600,7 +648,7 @@ def _extend(factor, Q, AQ, T, f0, f1, capacity, block, mass, local, rng):
     return Qn, AQn
 
 
-def _ritz(H, T, f1, bn, m, k, Qn, AQn, shift, mass):
+def _ritz(H, T, f1, bn, m, k, Qn, AQn, shift, mass, spectral_scale):
     """Rayleigh-Ritz on the closed part T[:f1, :f1]: (theta, Y) dominant first, W (bn, m) with
     ``S x_i - theta_i x_i = Qn W[:, i]``, the pencil's eigenvalues E (m,) and their relative residuals."""
     theta, Y = np.linalg.eigh(T[:f1, :f1])
@@ -613,7 +661,7 @@ def _ritz(H, T, f1, bn, m, k, Qn, AQn, shift, mass):
     else:
         residual_norm = np.zeros(m)
     E = shift + 1.0 / theta[:m]
-    scale = np.maximum(np.abs(E), 1e-2 * np.abs(E[min(k, m) - 1]))
+    scale = np.maximum(np.abs(E), residual_floor(E[: min(k, m)], spectral_scale))
     return theta, Y, W, E, residual_norm / scale
 
 
@@ -688,6 +736,7 @@ class HamiltonianEigensolver:
         self.spectral_scale = spectral_scale
         self.factor: CholeskySolver | None = None
         self._block = None  # the Chebyshev solver's last Ritz block (on its device)
+        self._pieces = connected_components(abs(self.stiffness) + abs(self.mass), directed=False)[0]
         self.basis: Eigenbasis | None = None
         self.continues: np.ndarray | None = None
         self.overlap: np.ndarray | None = None
@@ -718,10 +767,10 @@ class HamiltonianEigensolver:
         if method == "krylov" and self.factor is None:  # factored (once per solve) inside generalized_eigsh
             self.factor = CholeskySolver.unfactored(H.shape, self.backend)
         previous = self.basis
-        if method == "chebyshev":  # the whole Ritz block (guard vectors too) is the next start
+        if method == "chebyshev" and self._pieces == 1:  # the whole Ritz block (guard vectors too) is the next start
             start = time.perf_counter()
             values, vectors, info, self._block = _chebyshev(
-                H, self.mass, self.k, self.tol, self.device, self._block, return_block=True
+                H, self.mass, self.k, self.tol, self.device, self._block, self.spectral_scale or 0.0, return_block=True
             )
             fix_signs(vectors)
             info = SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start)
