@@ -112,11 +112,7 @@ def chebyshev_eigsh(
     if device == "cuda":
         M = xsp.csr_matrix(M)
 
-    X = xp.random.RandomState(seed).standard_normal((n, m))  # drawn where it is used
-    if initial is not None:
-        initial = xp.asarray(initial, dtype=np.float64).reshape(n, -1)[:, :m]
-        X[:, : initial.shape[1]] = initial * xp.asarray(np.sqrt(mass_diagonal))[:, None]
-    X = xp.linalg.qr(X)[0]
+    X = _start_block(xp, n, m, seed, initial, mass_diagonal)
     products, iterations = 0, 0
     while True:
         X = xp.ascontiguousarray(X)  # row-major blocks: each row of X is read whole by the GPU kernel
@@ -141,16 +137,20 @@ def chebyshev_eigsh(
     del MX
     block = X * xp.asarray(scale)[:, None]
     vectors = xp.asnumpy(block[:, :k]) if device == "cuda" else block[:, :k].copy()
-    info = {
-        "iterations": iterations,
-        "products": products,
-        "max_residual": float(relative.max()),
-        "seconds": time.perf_counter() - start_time,
-        "block": m,
-    }
-    if return_block:
-        info["ritz_block"] = block
+    seconds = time.perf_counter() - start_time
+    info = {"iterations": iterations, "products": products, "max_residual": float(relative.max()),
+            "seconds": seconds, "block": m, **({"ritz_block": block} if return_block else {})}  # fmt: skip
     return np.asarray(theta_host[:k], dtype=np.float64), np.asarray(vectors), info
+
+
+def _start_block(xp, n: int, m: int, seed: int, initial, mass_diagonal: np.ndarray):
+    """An orthonormal (n, m) start for the symmetric problem: seeded random columns, the first ones
+    replaced by ``initial`` (mass-orthonormal vectors of the pencil, carried over by A^1/2)."""
+    X = xp.random.RandomState(seed).standard_normal((n, m))  # drawn where it is used
+    if initial is not None:
+        initial = xp.asarray(initial, dtype=np.float64).reshape(n, -1)[:, :m]
+        X[:, : initial.shape[1]] = initial * xp.asarray(np.sqrt(mass_diagonal))[:, None]
+    return xp.linalg.qr(X)[0]
 
 
 def _symmetric_operator(H, scale: np.ndarray):

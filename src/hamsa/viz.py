@@ -76,15 +76,7 @@ def render_fields(
     (H, W, 3) uint8 image (also written to ``path``).
     """
     pv = _pyvista()
-    fields = [np.asarray(f, dtype=np.float64) for f in fields]
-    if not fields:
-        raise HamsaError("no fields to render")
-    meshes = list(mesh) if isinstance(mesh, (list, tuple)) and not _is_pair(mesh) else [mesh] * len(fields)
-    if len(meshes) != len(fields):
-        raise HamsaError(f"{len(meshes)} meshes for {len(fields)} fields")
-    if not (isinstance(view, str) and view in VIEWS) and np.shape(view) != (2, 3):
-        raise HamsaError(f"view must be one of {VIEWS} or a (direction, up) pair, got {view!r}")
-    titles = [f"field {i}" for i in range(len(fields))] if titles is None else list(titles)
+    meshes, fields, titles = _panels(mesh, fields, titles, view)
     columns = columns or min(len(fields), 5)
     rows = -(-len(fields) // columns)
     plotter = pv.Plotter(
@@ -126,6 +118,19 @@ def render_fields(
     with atomic_write(path, "wb") as handle:
         Image.fromarray(image).save(handle, format="PNG")
     return image
+
+
+def _panels(mesh, fields, titles, view):
+    """(meshes, fields as float arrays, titles), one per panel, after checking that they fit together."""
+    fields = [np.asarray(f, dtype=np.float64) for f in fields]
+    if not fields:
+        raise HamsaError("no fields to render")
+    meshes = list(mesh) if isinstance(mesh, (list, tuple)) and not _is_pair(mesh) else [mesh] * len(fields)
+    if len(meshes) != len(fields):
+        raise HamsaError(f"{len(meshes)} meshes for {len(fields)} fields")
+    if not (isinstance(view, str) and view in VIEWS) and np.shape(view) != (2, 3):
+        raise HamsaError(f"view must be one of {VIEWS} or a (direction, up) pair, got {view!r}")
+    return meshes, fields, [f"field {i}" for i in range(len(fields))] if titles is None else list(titles)
 
 
 _SCALAR_BAR = {
