@@ -304,7 +304,8 @@ def match_icskm(
     sampled = np.random.default_rng(seed).choice(source.n, min(sample, source.n), replace=False)
     embedding = KernelEmbedding(source, target, features, feature_weight)
     icp = KernelICP(embedding, p, q, landmark_weight, int(iterations))
-    runs = [(start, times) for times in schedules for start in sign_flip_starts(C, source, restarts)]
+    starts = sign_flip_starts(C, source, restarts)  # once: each start runs through every schedule
+    runs = [(start, times) for times in schedules for start in starts]
     C = lowest_energy_run(icp, runs, sampled)
     finest = embedding.at(schedules[0][-1])  # every schedule ends at the same finest scale
     return C, nearest_rows(finest.queries(C), finest.target)
