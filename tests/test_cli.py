@@ -45,7 +45,7 @@ def test_basis_writes_a_loadable_npz(mesh_file, tmp_path, capsys):
     [
         ("missing mesh", "no such file"),
         ("garbage mesh", "expected 'OFF'"),
-        ("short potential", "potential has shape"),
+        ("short potential", "expected 626 rows"),
         ("nan potential", "non-finite"),
         ("k too large", "between 1 and the number of vertices"),
         ("bad output", "must end in .npz"),

@@ -6,35 +6,49 @@ the library's submodules (``hamsa.diffusion``, ``hamsa.matching``, ...); the pap
 ``hamsa.paper`` (imported on demand).
 """
 
-from hamsa import (
-    cmm,
-    compression,
-    datasets,
-    diffusion,
-    errors,
-    evaluation,
-    geodesic,
-    io,
-    matching,
-    mesh,
-    nodal,
-    noise,
-    operators,
-    optimize,
-    potentials,
-    repair,
-    shapes,
-    theory,
-    viz,
-)
-from hamsa.eigen import Eigenbasis, eigenbasis, generalized_eigsh
-from hamsa.errors import HamsaError, MeshError, MissingDependencyError, PotentialError, SolverError
-from hamsa.io import load_mesh, save_mesh
-from hamsa.mesh import TriMesh
-from hamsa.operators import hamiltonian, mass_matrix, stiffness_matrix
-from hamsa.optimize import optimize_potential
+import importlib
 
 __version__ = "0.2.0"
+
+_SUBMODULES = (
+    "cmm", "compression", "datasets", "diffusion", "errors", "evaluation", "files", "geodesic", "io", "matching",
+    "mesh", "nodal", "noise", "operators", "optimize", "paper", "potentials", "repair", "shapes", "theory", "viz",
+)  # fmt: skip
+_NAMES = {
+    "Eigenbasis": "hamsa.eigen",
+    "eigenbasis": "hamsa.eigen",
+    "generalized_eigsh": "hamsa.eigen",
+    "HamsaError": "hamsa.errors",
+    "MeshError": "hamsa.errors",
+    "MissingDependencyError": "hamsa.errors",
+    "PotentialError": "hamsa.errors",
+    "SolverError": "hamsa.errors",
+    "load_mesh": "hamsa.io",
+    "save_mesh": "hamsa.io",
+    "TriMesh": "hamsa.mesh",
+    "hamiltonian": "hamsa.operators",
+    "mass_matrix": "hamsa.operators",
+    "stiffness_matrix": "hamsa.operators",
+    "optimize_potential": "hamsa.optimize",
+}
+
+
+def __getattr__(name: str):
+    # Submodules and the top-level names load on first use: ``import hamsa`` stays cheap (the command-line
+    # tool starts fast and under its Ctrl-C handler), and ``hamsa.diffusion`` works without an import.
+    if name in _SUBMODULES:
+        value = importlib.import_module(f"hamsa.{name}")
+    elif name in _NAMES:
+        value = getattr(importlib.import_module(_NAMES[name]), name)
+    else:
+        raise AttributeError(f"module 'hamsa' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "Eigenbasis",
@@ -44,6 +58,7 @@ __all__ = [
     "diffusion",
     "errors",
     "evaluation",
+    "files",
     "geodesic",
     "io",
     "matching",

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 import numpy as np
 
-from hamsa.io import atomic_write
+from hamsa.errors import HamsaError
+from hamsa.files import atomic_write, read_bytes
 
 
 def content_key(*parts) -> str:
@@ -39,8 +39,8 @@ def content_key(*parts) -> str:
 def load_record(path, key: str, field: str = "key") -> dict | None:
     """The JSON record at ``path`` if it can be read and its ``field`` equals ``key``, else None."""
     try:
-        record = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
+        record = json.loads(read_bytes(path))
+    except (HamsaError, ValueError):
         return None
     return record if isinstance(record, dict) and record.get(field) == key else None
 

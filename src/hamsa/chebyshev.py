@@ -27,7 +27,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from hamsa.errors import MissingDependencyError, SolverError
+from hamsa.errors import ConvergenceError, MissingDependencyError, SolverError
 
 DEVICES = ("cpu", "cuda")
 _MAX_AMPLIFICATION = 1e8
@@ -123,7 +123,7 @@ def chebyshev_eigsh(
             break
         iterations += 1
         if iterations > max_iterations:
-            raise SolverError(
+            raise ConvergenceError(
                 f"Chebyshev eigensolver did not converge in {max_iterations} iterations: largest relative "
                 f"residual {relative.max():.2e} > tol {tol:.1e}"
             )

@@ -7,6 +7,7 @@ leaves a partial output file behind (outputs are written to a temporary file, th
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import sys
 import time
@@ -15,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from hamsa import __version__
-from hamsa.errors import HamsaError, MeshError
+from hamsa.errors import ConvergenceError, HamsaError, MeshError
 
 EXIT_BAD_INPUT = 2
+EXIT_SOLVER_FAILED = 3
 
 
 def _positive_int(text: str) -> int:
@@ -246,13 +248,17 @@ def _parser() -> argparse.ArgumentParser:
 
 def _load_potential(path: str, n: int) -> np.ndarray:
     from hamsa.errors import PotentialError
+    from hamsa.files import load_array, read_bytes
     from hamsa.operators import check_potential
 
     try:
-        values = np.load(path, allow_pickle=False) if path.endswith(".npy") else np.loadtxt(path, ndmin=1)
-    except FileNotFoundError:
-        raise PotentialError(f"cannot read potential '{path}': no such file") from None
-    except (OSError, ValueError, EOFError) as exc:
+        if path.endswith(".npy"):
+            values = load_array(path, ndim=(1, 2), rows=n)
+        else:
+            values = np.loadtxt(io.BytesIO(read_bytes(path)), ndmin=1)
+    except HamsaError as exc:
+        raise PotentialError(f"potential: {exc}") from None
+    except ValueError as exc:
         raise PotentialError(f"cannot read potential '{path}': {exc}") from None
     try:
         return check_potential(values, n)
@@ -260,14 +266,12 @@ def _load_potential(path: str, n: int) -> np.ndarray:
         raise PotentialError(f"'{path}': {exc}") from None
 
 
-def _output_path(path: str, suffix: str | None = None) -> Path:
-    """Check an output path before any work is done: its suffix and that its folder exists."""
-    output = Path(path)
-    if suffix and output.suffix != suffix:
-        raise HamsaError(f"output '{output}' must end in {suffix}")
-    if not (output.parent if str(output.parent) else Path(".")).is_dir():
-        raise HamsaError(f"cannot write '{output}': folder '{output.parent}' does not exist")
-    return output
+def _output_path(args, suffix: str | None = None, *inputs) -> Path:
+    """``args.output``, checked before any work is done (:func:`hamsa.files.check_output`): its suffix, that
+    it can be written, and that it is none of the command's input files."""
+    from hamsa.files import check_output
+
+    return check_output(args.output, suffix=suffix, inputs=[x for x in inputs if x])
 
 
 def _info(args) -> None:
@@ -309,7 +313,7 @@ def _info(args) -> None:
 def _basis(args) -> None:
     from hamsa.eigen import eigenbasis
 
-    output = _output_path(args.output, ".npz")
+    output = _output_path(args, ".npz", args.mesh, args.potential)
     start = time.perf_counter()
     mesh = _load_for_operators(args.mesh, args.repair)
     loaded = time.perf_counter()
@@ -332,16 +336,13 @@ def _basis(args) -> None:
 
 
 def _optimize(args) -> None:
-    from hamsa.io import atomic_write
+    from hamsa.files import atomic_write, load_array
     from hamsa.optimize import optimize_potential
 
-    output = _output_path(args.output, ".npy")
+    output = _output_path(args, ".npy", args.mesh, args.data)
     mesh = _load_for_operators(args.mesh, args.repair)
     if args.data:
-        try:
-            data = np.load(args.data, allow_pickle=False)
-        except (OSError, ValueError, EOFError) as exc:
-            raise HamsaError(f"cannot read data '{args.data}': {exc}") from None
+        data = load_array(args.data, ndim=(1, 2), rows=mesh.n_vertices)
     else:
         data = mesh.vertices
     start = time.perf_counter()
@@ -369,13 +370,13 @@ def _optimize(args) -> None:
 
 def _compress(args) -> None:
     from hamsa import compression
-    from hamsa.io import atomic_write
+    from hamsa.files import atomic_write
 
-    _output_path(args.output)
+    output = _output_path(args, None, args.mesh)
     mesh = _load_for_operators(args.mesh, args.repair)
     start = time.perf_counter()
     data = compression.encode(mesh, args.k, args.bits, args.method)
-    with atomic_write(args.output) as handle:
+    with atomic_write(output) as handle:
         handle.write(data)
     size = compression.sizes(data)
     decoded = compression.decode(data, mesh.faces)
@@ -397,25 +398,24 @@ def _compress(args) -> None:
 
 def _decompress(args) -> None:
     from hamsa import compression
-    from hamsa.io import load_mesh, save_mesh
+    from hamsa.files import read_bytes
+    from hamsa.io import load_mesh, mesh_format, save_mesh
     from hamsa.mesh import TriMesh
 
-    try:
-        with open(args.compressed, "rb") as handle:
-            data = handle.read()
-    except OSError as exc:
-        raise HamsaError(f"cannot read '{args.compressed}': {exc.strerror or exc}") from None
+    output = _output_path(args, None, args.compressed, args.faces)
+    mesh_format(output)
+    data = read_bytes(args.compressed)
     connectivity = load_mesh(args.faces)
     vertices = compression.decode(data, connectivity.faces)
-    save_mesh(TriMesh(vertices, connectivity.faces), args.output)
+    save_mesh(TriMesh(vertices, connectivity.faces), output)
     print(f"wrote           {args.output} ({len(vertices)} vertices)")
 
 
 def _modes(args) -> None:
     from hamsa.cmm import compressed_modes
-    from hamsa.io import atomic_write
+    from hamsa.files import atomic_write
 
-    output = _output_path(args.output, ".npz")
+    output = _output_path(args, ".npz", args.mesh)
     mesh = _load_for_operators(args.mesh, args.repair)
     if args.unit_area:
         mesh = mesh.scaled_to_unit_area()
@@ -450,11 +450,12 @@ def _modes(args) -> None:
 
 def _match(args) -> None:
     from hamsa.eigen import eigenbasis
+    from hamsa.files import atomic_write
     from hamsa.geodesic import geodesic_distance
-    from hamsa.io import atomic_write, load_mesh
+    from hamsa.io import load_mesh
     from hamsa.matching import match
 
-    output = _output_path(args.output, ".npy")
+    output = _output_path(args, ".npy", args.source, args.target)
     start = time.perf_counter()
     meshes = [load_mesh(path).scaled_to_unit_area() for path in (args.source, args.target)]  # comparable spectra
     landmarks = _landmark_pairs(args.landmarks, meshes) if args.method == "icskm" else None
@@ -510,7 +511,9 @@ def _benchmark_matching(args) -> None:
     dataset = {"tosca": load_tosca, "scape": load_scape, "folder": load_folder}[kind](root)
     if not dataset.pairs():
         raise HamsaError(f"'{root}' has no evaluation pairs (each class needs at least two shapes)")
-    output = _output_path(args.output)
+    from hamsa.files import check_output_folder
+
+    output = check_output_folder(args.output)
     table = benchmark_dataset(
         dataset,
         output,
@@ -539,7 +542,7 @@ def _view(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.viz import to_html
 
-    output = _output_path(args.output, ".html")
+    output = _output_path(args, ".html", args.mesh, args.potential)
     mesh = _load_for_operators(args.mesh, args.repair)
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
     basis = eigenbasis(mesh, args.k, potential)
@@ -551,8 +554,10 @@ def _view(args) -> None:
 
 
 def _reproduce(args) -> None:
+    from hamsa.files import check_output_folder
     from hamsa.paper.reproduce import reproduce
 
+    check_output_folder(args.output)
     results = reproduce(args.output, data=args.data, quick=args.quick, force=args.force, only=args.only)
     failed = [name for name, r in results["experiments"].items() if r["status"] != "ok"]
     verdicts = [c["verdict"] for c in results["claims"]]
@@ -590,7 +595,9 @@ def _demo(args) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    """Run one command; returns the exit code: 0, 2 for bad input (one line on stderr naming it), 3 when a
+    solver did not converge, 130 on Ctrl-C, 1 for an operating-system error (e.g. disk full)."""
+    command = "hamsa"
     handlers = {
         "info": _info,
         "basis": _basis,
@@ -605,9 +612,14 @@ def main(argv: list[str] | None = None) -> int:
         "demo": _demo,
     }
     try:
+        args = _parser().parse_args(argv)
+        command = f"hamsa {args.command}"
         handlers[args.command](args)
+    except ConvergenceError as exc:
+        print(f"{command}: solver failed: {exc}", file=sys.stderr)
+        return EXIT_SOLVER_FAILED
     except HamsaError as exc:
-        print(f"hamsa {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("hamsa: interrupted", file=sys.stderr)
@@ -615,8 +627,13 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
+    except OSError as exc:
+        print(f"{command}: error: {exc.strerror or exc}{f': {exc.filename}' if exc.filename else ''}", file=sys.stderr)
+        return 1
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from hamsa.__main__ import run
+
+    sys.exit(run())

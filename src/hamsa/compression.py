@@ -18,8 +18,10 @@ size separately (``permutation_bits``), next to the counted geometry payload (``
 
 Coefficients are quantized uniformly per coordinate to ``bits`` bits and entropy-coded with LZMA.
 File layout (little endian): magic ``HMZ``, format version, method, then length-prefixed sections
-(header numbers, coefficients, permutation, potential), each with a CRC-32; any corruption or
-truncation raises :class:`CompressionError`.
+(header numbers, coefficients, permutation, potential), each with a CRC-32, and a final CRC-32 of
+every byte before it (magic, version and method included). Any corruption or truncation raises
+:class:`CompressionError`; the sizes a header claims are checked against the faces before anything
+is allocated, and every decompressed section is bounded by the size the header implies.
 """
 
 from __future__ import annotations
@@ -33,11 +35,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from hamsa.eigen import generalized_eigsh
-from hamsa.errors import CompressionError, HamsaError
+from hamsa.errors import CompressionError, FileAccessError, HamsaError
+from hamsa.files import bounded_decompress
 from hamsa.mesh import TriMesh, as_trimesh
 
 MAGIC = b"HMZ"
-VERSION = 1
+VERSION = 2
 METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
 _HEADER = struct.Struct("<IIBdd")  # n, k, bits, alpha, beta
 
@@ -172,50 +175,74 @@ def encode(
     coefficients = lzma.compress(q.astype("<u4").tobytes(), preset=9 | lzma.PRESET_EXTREME)
     permutation = lzma.compress(np.diff(order, prepend=0).astype("<i4").tobytes()) if method == "hamiltonian" else b""
     body = b"".join(_section(x) for x in (header, coefficients, permutation, potential_bytes))
-    return MAGIC + bytes([VERSION, METHODS.index(method)]) + body
+    blob = MAGIC + bytes([VERSION, METHODS.index(method)]) + body
+    return blob + struct.pack("<I", zlib.crc32(blob))
 
 
 def sizes(data: bytes) -> EncodedSizes:
     """How the bits of an encoded file split into the counted payload and the uncounted side parts."""
     method, sections = _parse(data)
     n = _HEADER.unpack_from(sections[0])[0]
-    overhead = 8 * (len(MAGIC) + 2)
+    overhead = 8 * (len(MAGIC) + 2 + 4)
     payload = overhead + 8 * (len(sections[0]) + len(sections[1]) + 16)
     return EncodedSizes(payload, 8 * (len(sections[2]) + 8), 8 * (len(sections[3]) + 8) if sections[3] else 0, n)
 
 
 def _parse(data: bytes) -> tuple[str, list[bytes]]:
-    if not isinstance(data, (bytes, bytearray)) or len(data) < len(MAGIC) + 2 or data[: len(MAGIC)] != MAGIC:
+    if not isinstance(data, (bytes, bytearray)) or len(data) < len(MAGIC) + 6 or data[: len(MAGIC)] != MAGIC:
         raise CompressionError("not a hamsa compressed mesh (bad magic)")
     version, method = data[len(MAGIC)], data[len(MAGIC) + 1]
     if version != VERSION:
-        raise CompressionError(f"file has format version {version}, this hamsa reads {VERSION}")
+        raise CompressionError(f"file has format version {version}, this hamsa reads {VERSION} (re-encode it)")
+    if zlib.crc32(data[:-4]) != struct.unpack("<I", data[-4:])[0]:
+        raise CompressionError("file is truncated or corrupted (the checksum over the whole file does not match)")
     if method >= len(METHODS):
         raise CompressionError(f"unknown method id {method}")
-    return METHODS[method], _read_sections(bytes(data[len(MAGIC) + 2 :]), 4)
+    sections = _read_sections(bytes(data[len(MAGIC) + 2 : -4]), 4)
+    if len(sections[0]) != _HEADER.size + 48:
+        raise CompressionError(f"file is corrupted: its header has {len(sections[0])} bytes")
+    return METHODS[method], sections
+
+
+def _unpack(blob: bytes, dtype: str, count: int, what: str) -> np.ndarray:
+    """``count`` values of ``dtype`` from an LZMA section, never decompressing more than they need."""
+    size = np.dtype(dtype).itemsize * count
+    try:
+        raw = bounded_decompress(blob, "lzma", size, what)
+    except FileAccessError as exc:
+        raise CompressionError(f"file is corrupted: {exc}") from None
+    if len(raw) != size:
+        raise CompressionError(f"file is corrupted: the {what} has {len(raw)} bytes, expected {size}")
+    return np.frombuffer(raw, dtype)
 
 
 def decode(data: bytes, faces) -> np.ndarray:
-    """Rebuild the vertex coordinates (n, 3), in the original vertex order, from ``encode``'s bytes and the faces."""
+    """Rebuild the vertex coordinates (n, 3), in the original vertex order, from ``encode``'s bytes and the faces.
+
+    Raises CompressionError if the file is not an intact file of this format version, or if ``faces``
+    do not reference exactly the encoded number of vertices.
+    """
     method, (header, coefficient_bytes, permutation_bytes, potential_bytes) = _parse(data)
-    try:
-        n, k, bits, alpha, beta = _HEADER.unpack_from(header)
-        low = np.frombuffer(header, "<f8", 3, _HEADER.size)
-        span = np.frombuffer(header, "<f8", 3, _HEADER.size + 24)
-        q = np.frombuffer(lzma.decompress(coefficient_bytes), "<u4").reshape(k, 3)
-        order = (
-            np.cumsum(np.frombuffer(lzma.decompress(permutation_bytes), "<i4")) if permutation_bytes else np.arange(n)
-        )
-        potential = np.frombuffer(lzma.decompress(potential_bytes), "<f8") if potential_bytes else None
-    except (struct.error, ValueError, lzma.LZMAError) as exc:
-        raise CompressionError(f"file is corrupted: {exc}") from None
+    n, k, bits, alpha, beta = _HEADER.unpack_from(header)
     faces = np.asarray(faces)
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.size == 0 or faces.max() >= n or faces.min() < 0:
-        raise CompressionError(f"faces do not fit the encoded mesh of {n} vertices")
-    if len(order) != n or not np.array_equal(np.sort(order), np.arange(n)):
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.size == 0 or faces.dtype.kind not in "iu":
+        raise CompressionError(f"faces must be an (m, 3) integer array, got {faces.shape} {faces.dtype}")
+    if faces.min() < 0 or faces.max() + 1 != n:
+        raise CompressionError(f"faces reference vertices 0..{faces.max()}, the file encodes {n} vertices")
+    if not (1 <= k < n - 1 and 2 <= bits <= 24):
+        raise CompressionError(f"file is corrupted: k = {k}, bits = {bits} do not fit n = {n}")
+    low = np.frombuffer(header, "<f8", 3, _HEADER.size)
+    span = np.frombuffer(header, "<f8", 3, _HEADER.size + 24)
+    q = _unpack(coefficient_bytes, "<u4", 3 * k, "coefficients").reshape(k, 3)
+    order = np.cumsum(_unpack(permutation_bytes, "<i4", n, "vertex order")) if permutation_bytes else np.arange(n)
+    potential = _unpack(potential_bytes, "<f8", n, "potential") if potential_bytes else None
+    if (method == "hamiltonian") != bool(permutation_bytes) or (method == "hamiltonian-opt") != bool(potential_bytes):
+        raise CompressionError(f"file is corrupted: its sections do not match the method {method!r}")
+    if not np.array_equal(np.sort(order), np.arange(n)):
         raise CompressionError("file is corrupted: the stored vertex order is not a permutation")
-    if potential is not None and potential.shape != (n,):
-        raise CompressionError("file is corrupted: the stored potential has the wrong length")
+    parameters = [low, span, alpha, beta] + ([] if potential is None else [potential])
+    if not all(np.all(np.isfinite(p)) for p in parameters):
+        raise CompressionError("file is corrupted: non-finite quantization or potential parameters")
     L = combinatorial_laplacian(faces, n)[order][:, order]
     if method == "mhb":
         diagonal = None

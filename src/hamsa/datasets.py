@@ -21,6 +21,7 @@ import numpy as np
 from hamsa.cache import content_key
 from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError
+from hamsa.files import load_npz
 from hamsa.io import load_mesh
 from hamsa.mesh import TriMesh, as_trimesh
 
@@ -149,6 +150,7 @@ def cached_eigenbasis(mesh, k: int, cache_dir, potential=None, mass: str = "voro
     Entries are written atomically; an entry that cannot be read, or whose stored key does not match, is
     recomputed (so an interrupted run never leaves a corrupt cache behind it).
     """
+    mesh = as_trimesh(mesh)
     folder = Path(cache_dir)
     folder.mkdir(parents=True, exist_ok=True)
     key = basis_key(mesh, k, potential, mass)
@@ -156,9 +158,8 @@ def cached_eigenbasis(mesh, k: int, cache_dir, potential=None, mass: str = "voro
     if path.exists():
         try:
             basis = Eigenbasis.load(path)
-            with np.load(path, allow_pickle=False) as data:
-                stored = str(data["cache_key"]) if "cache_key" in data.files else ""
-            if stored == key and basis.k == k:
+            stored = load_npz(path).get("cache_key")
+            if stored is not None and str(stored) == key and basis.k == k and basis.n == mesh.n_vertices:
                 return basis
         except HamsaError:
             pass

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import hashlib
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,8 +44,9 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from hamsa.chebyshev import residual_floor
-from hamsa.errors import HamsaError, SolverError
+from hamsa.errors import ConvergenceError, HamsaError, SolverError
 from hamsa.factorization import CholeskySolver
+from hamsa.files import atomic_write, load_npz
 from hamsa.mesh import as_trimesh
 from hamsa.operators import MASS_KINDS, check_potential, hamiltonian
 from hamsa.resources import require_memory
@@ -109,16 +109,16 @@ class Eigenbasis:
 
     def project(self, f) -> np.ndarray:
         """Coefficients ``Psi^T A f`` of a function (n,) or functions (n, d): returns (k,) or (k, d)."""
-        f = np.asarray(f, dtype=np.float64)
-        if f.shape[0] != self.n:
-            raise HamsaError(f"function has {f.shape[0]} values, the basis has {self.n} vertices")
+        f = _real_array(f, "function")
+        if f.ndim not in (1, 2) or f.shape[0] != self.n:
+            raise HamsaError(f"function has shape {f.shape}, expected ({self.n},) or ({self.n}, d)")
         return self.vectors.T @ (self.mass @ f)
 
     def reconstruct(self, coefficients) -> np.ndarray:
         """The function ``Psi c`` from coefficients (k,) or (k, d): returns (n,) or (n, d)."""
-        c = np.asarray(coefficients, dtype=np.float64)
-        if c.shape[0] != self.k:
-            raise HamsaError(f"got {c.shape[0]} coefficients, the basis has k = {self.k}")
+        c = _real_array(coefficients, "coefficients")
+        if c.ndim not in (1, 2) or c.shape[0] != self.k:
+            raise HamsaError(f"coefficients have shape {c.shape}, expected ({self.k},) or ({self.k}, d)")
         return self.vectors @ c
 
     def truncate(self, k: int) -> Eigenbasis:
@@ -144,8 +144,6 @@ class Eigenbasis:
             arrays["potential"] = self.potential
         arrays["checksum"] = np.array(_checksum(arrays))
         arrays.update(extra or {})
-        from hamsa.io import atomic_write
-
         with atomic_write(path, "wb") as handle:
             np.savez(handle, **arrays)
 
@@ -161,54 +159,110 @@ class Eigenbasis:
     def from_arrays(cls, values, vectors, mass, potential=None, check: bool = True) -> Eigenbasis:
         """An Eigenbasis from arrays computed elsewhere (e.g. by scipy's eigsh, pyFM or LaPy).
 
-        ``mass`` is the (n,) lumped masses or an (n, n) sparse matrix; with ``check`` the columns must be
-        mass-orthonormal to 1e-6 (normalize them first) and the values ascending.
+        ``mass`` is the (n,) lumped masses or an (n, n) sparse matrix. Shapes must agree and everything be
+        finite; with ``check`` the values must also be ascending and the columns mass-orthonormal to 1e-6
+        (normalize them first). Raises HamsaError naming the first problem.
         """
-        values = np.asarray(values, dtype=np.float64)
-        vectors = np.asarray(vectors, dtype=np.float64)
-        if vectors.ndim != 2 or values.shape != (vectors.shape[1],):
-            raise HamsaError(f"values {values.shape} and vectors {vectors.shape} must be (k,) and (n, k)")
-        n = vectors.shape[0]
+        values = _real_array(values, "values")
+        vectors = _real_array(vectors, "vectors")
         if sp.issparse(mass):
             matrix, kind = sp.csr_matrix(mass, dtype=np.float64), "full"
         else:
-            matrix, kind = sp.diags(np.asarray(mass, dtype=np.float64)).tocsr(), "voronoi"
-        if matrix.shape != (n, n):
-            raise HamsaError(f"mass must be ({n},) or ({n}, {n}), got shape {np.shape(mass)}")
+            lumped = _real_array(mass, "mass")
+            if lumped.ndim != 1:
+                raise HamsaError(
+                    f"mass must be (n,) lumped masses or an (n, n) sparse matrix, got shape {lumped.shape}"
+                )
+            matrix, kind = sp.diags(lumped).tocsr(), "voronoi"
         if potential is not None:
-            potential = np.asarray(potential, dtype=np.float64)
-            if potential.shape != (n,):
-                raise HamsaError(f"potential must be ({n},), got {potential.shape}")
+            potential = _real_array(potential, "potential")
+        return cls._validated(values, vectors, matrix, potential, kind, SolveInfo(method="arrays"), check)
+
+    @classmethod
+    def _validated(cls, values, vectors, matrix, potential, kind, info, check: bool = True) -> Eigenbasis:
+        """The one validation of :meth:`from_arrays` and :meth:`load`: shapes, finiteness, positive lumped
+        masses, then (``check``) ascending values and mass-orthonormal vectors."""
+        if vectors.ndim != 2 or values.shape != (vectors.shape[1],) or values.size == 0:
+            raise HamsaError(f"values {values.shape} and vectors {vectors.shape} must be (k,) and (n, k), k >= 1")
+        n = vectors.shape[0]
+        if matrix.shape != (n, n):
+            raise HamsaError(f"mass must be ({n},) or ({n}, {n}) for {n} vertices, got {matrix.shape}")
+        if potential is not None and potential.shape != (n,):
+            raise HamsaError(f"potential must be ({n},), got {potential.shape}")
+        for name, array in (("values", values), ("vectors", vectors), ("mass", matrix.data), ("potential", potential)):
+            if array is not None and not np.all(np.isfinite(array)):
+                raise HamsaError(f"{name} must be finite (found NaN or Inf)")
+        if kind != "full" and not np.all(matrix.diagonal() > 0):
+            raise HamsaError("lumped masses must be positive")
         if check:
-            if not np.all(np.isfinite(values)) or not np.all(np.isfinite(vectors)):
-                raise HamsaError("values and vectors must be finite")
             if np.any(np.diff(values) < 0):
                 raise HamsaError("values must be ascending (sort the pairs first)")
             error = np.abs(vectors.T @ (matrix @ vectors) - np.eye(values.size)).max()
-            if error > 1e-6:
+            if not error <= 1e-6:
                 raise HamsaError(f"the vectors are not mass-orthonormal (max |Psi^T A Psi - I| = {error:.1e})")
-        return cls(values, vectors, matrix, potential, kind, SolveInfo(method="arrays"))
+        return cls(values, vectors, matrix, potential, kind, info)
 
     @classmethod
     def load(cls, path) -> Eigenbasis:
-        """Read a basis written by :meth:`save`."""
+        """Read a basis written by :meth:`save`, validated like :meth:`from_arrays` before any array is used.
+
+        Every member is checked from its header before it is read (dtype, dimensions, size), the sparse
+        mass's index arrays must be in range, and the arrays must match their stored SHA-256 checksum.
+        Raises HamsaError (:class:`~hamsa.errors.FileAccessError` for an unreadable or oversized file).
+        """
+        real = {"ndim": 1, "numeric": True}
+        arrays = load_npz(path, {"values": real, "vectors": {"ndim": 2, "numeric": True}, "mass_data": real,
+                                 "mass_indices": real, "mass_indptr": real, "potential": real,
+                                 "format_version": {"ndim": 0, "numeric": True}})  # fmt: skip
+        missing = [name for name in ("format_version", "values", "vectors", "mass_kind") if name not in arrays]
+        missing += [name for name in ("mass_data", "mass_indices", "mass_indptr") if name not in arrays]
+        if missing:
+            raise HamsaError(f"'{path}' is not an eigenbasis file: it has no {', '.join(missing)}")
+        version = int(arrays["format_version"])
+        if version != _FORMAT_VERSION:
+            raise HamsaError(f"'{path}' has eigenbasis format {version}, this hamsa reads {_FORMAT_VERSION}")
+        if "checksum" in arrays and str(arrays["checksum"]) != _checksum(arrays):
+            raise HamsaError(f"'{path}' is corrupt: its arrays do not match their SHA-256 checksum")
+        kind = str(arrays["mass_kind"])
+        if kind not in MASS_KINDS:
+            raise HamsaError(f"'{path}' has mass kind {kind!r}, expected one of {MASS_KINDS}")
+        vectors = np.asarray(arrays["vectors"], dtype=np.float64)
         try:
-            with np.load(path, allow_pickle=False) as data:
-                version = int(data["format_version"])
-                if version != _FORMAT_VERSION:
-                    raise HamsaError(f"'{path}' has eigenbasis format {version}, this hamsa reads {_FORMAT_VERSION}")
-                values, vectors = data["values"], data["vectors"]
-                n = vectors.shape[0]
-                mass = sp.csr_matrix((data["mass_data"], data["mass_indices"], data["mass_indptr"]), shape=(n, n))
-                potential = data["potential"] if "potential" in data.files else None
-                kind = str(data["mass_kind"])
-                if "checksum" in data.files and str(data["checksum"]) != _checksum(data):
-                    raise HamsaError(f"'{path}' is corrupt: its arrays do not match their SHA-256 checksum")
-        except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            if isinstance(exc, HamsaError):
-                raise
-            raise HamsaError(f"cannot read eigenbasis '{path}': {exc}") from None
-        return cls(values, vectors, mass, potential, kind)
+            mass = _csr_matrix(arrays["mass_data"], arrays["mass_indices"], arrays["mass_indptr"], vectors.shape[0])
+            potential = arrays.get("potential")
+            return cls._validated(
+                np.asarray(arrays["values"], dtype=np.float64),
+                vectors,
+                mass,
+                None if potential is None else np.asarray(potential, dtype=np.float64),
+                kind,
+                SolveInfo(method="loaded"),
+            )
+        except HamsaError as exc:
+            raise HamsaError(f"'{path}' is not a valid eigenbasis: {exc}") from None
+
+
+def _real_array(values, name: str) -> np.ndarray:
+    """``values`` as a float64 array, refusing complex, string and ragged input (HamsaError)."""
+    if np.iscomplexobj(values):
+        raise HamsaError(f"{name} must be real, got complex numbers")
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise HamsaError(f"{name} must be an array of real numbers: {exc}") from None
+
+
+def _csr_matrix(data, indices, indptr, n: int) -> sp.csr_matrix:
+    """An (n, n) CSR matrix from stored arrays, every index checked before scipy sees it."""
+    if indices.dtype.kind not in "iu" or indptr.dtype.kind not in "iu":
+        raise HamsaError("the mass matrix's index arrays must be integers")
+    if indptr.shape != (n + 1,) or data.shape != indices.shape:
+        raise HamsaError(f"the mass matrix's arrays do not describe an ({n}, {n}) matrix")
+    if indptr[0] != 0 or indptr[-1] != len(indices) or np.any(np.diff(indptr.astype(np.int64)) < 0):
+        raise HamsaError("the mass matrix's row pointers are not increasing from 0 to its number of entries")
+    if len(indices) and (indices.min() < 0 or indices.max() >= n):
+        raise HamsaError(f"the mass matrix has column indices outside 0..{n - 1}")
+    return sp.csr_matrix((data.astype(np.float64), indices.astype(np.int64), indptr.astype(np.int64)), shape=(n, n))
 
 
 _CHECKED = ("values", "vectors", "mass_data", "mass_indices", "mass_indptr", "potential")
@@ -364,13 +418,7 @@ def generalized_eigsh(
     if method == "chebyshev":
         values, vectors, info, _ = _chebyshev(H, A, k, tol, device, initial, spectral_scale)
     elif method == "dense":
-        if n > _DENSE_LIMIT_N:
-            raise SolverError(
-                f"a dense eigensolve of n = {n} needs {3 * 8 * n * n / 1e9:.0f} GB; ask for fewer than n/3 "
-                "eigenpairs to use the sparse solver"
-            )
-        require_memory(3 * 8 * n * n, f"a dense eigensolve of n = {n}")
-        values, vectors = sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
+        values, vectors = _dense_eigh(H, A, k)
         info = SolveInfo(method="dense")
     else:
         values, vectors, info = _block_krylov(
@@ -431,6 +479,31 @@ def _resolve_method(method: str, device: str, n: int, k: int) -> str:
     if method != "auto":
         return method
     return "chebyshev" if device == "cuda" else "dense" if (n <= _DENSE_MAX_N or 3 * k >= n) else "krylov"
+
+
+def _dense_eigh(H, A, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k smallest pairs by a dense LAPACK solve: the policy for small meshes and for k close to n.
+
+    A lumped (diagonal) mass is folded into the matrix, ``D^-1/2 H D^-1/2 y = E y`` with ``psi = D^-1/2 y``
+    (one dense matrix instead of two). The memory check counts the dense matrices, LAPACK's copy and the
+    eigenvectors; a solve that does not fit, or n > 20000, is refused before anything is allocated.
+    """
+    n = H.shape[0]
+    mass = _MassOperator(A)
+    lumped = mass.is_diagonal
+    need = 8 * ((2 if lumped else 4) * n * n + 2 * n * k)
+    if n > _DENSE_LIMIT_N:
+        raise SolverError(
+            f"k = {k} of n = {n} needs a dense eigensolve ({need / 1e9:.0f} GB): ask for fewer than n/3 eigenpairs "
+            "to use the sparse solver"
+        )
+    require_memory(need, f"a dense eigensolve of n = {n} (k = {k})")
+    if not lumped:
+        return sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
+    scale = 1.0 / np.sqrt(mass.diagonal)
+    values, vectors = sla.eigh((sp.diags(scale) @ H @ sp.diags(scale)).toarray(), subset_by_index=[0, k - 1],
+                               overwrite_a=True, check_finite=False)  # fmt: skip
+    return values, vectors * scale[:, None]
 
 
 def _chebyshev(H, A, k, tol, device, initial, spectral_scale, return_block=False):
@@ -562,9 +635,9 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         raise SolverError(f"k = {k} is too large for the sparse solver on n = {n}: use method='dense'")
     # A Q is kept only for a full mass matrix; a diagonal one is applied on the fly (half the memory)
     copies = 1 if mass.is_diagonal else 2
-    require_memory(
-        copies * 8 * n * capacity, f"the Krylov basis for k = {k} eigenpairs of n = {n} ({copies} x {capacity} columns)"
-    )
+    # the basis (and its A-image), the projected matrix and its eigenvectors, and the Ritz vectors with residuals
+    need = 8 * (copies * n * capacity + 3 * capacity * capacity + 3 * n * wanted)
+    require_memory(need, f"the Krylov basis for k = {k} eigenpairs of n = {n} ({copies} x {capacity} columns)")
     Q = np.empty((n, capacity), order="F")  # column blocks are contiguous
     AQ = None if mass.is_diagonal else np.empty((n, capacity), order="F")
     T = np.zeros((capacity, capacity))
@@ -592,7 +665,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         if restart:  # thick restart: keep the best `wanted` Ritz vectors
             cycles += 1
             if cycles > max_cycles:
-                raise SolverError(
+                raise ConvergenceError(
                     f"eigensolver did not converge in {max_cycles} restarts: largest relative residual "
                     f"{residual[:k].max():.2e} > tol {tol:.1e}"
                 )

@@ -2,7 +2,7 @@
 
 Every error a user can cause with bad input is a :class:`HamsaError` (a ``ValueError``), so a
 script can catch them all at once, and the command-line tool turns them into one line on stderr
-and exit code 2.
+and exit code 2 — except :class:`ConvergenceError`, a solver failure rather than bad input (exit 3).
 """
 
 from __future__ import annotations
@@ -21,11 +21,22 @@ class PotentialError(HamsaError):
 
 
 class SolverError(HamsaError):
-    """An eigenproblem request is impossible (k out of range) or the solver did not converge."""
+    """An eigenproblem request is impossible (k out of range, a matrix that is not positive definite)."""
 
 
 class CompressionError(HamsaError):
     """A compressed file is corrupted, truncated, of another version, or does not fit the faces."""
+
+
+class FileAccessError(HamsaError):
+    """A file cannot be read or written safely: missing, not a regular file, beyond the read limit, an
+    array whose header does not match what is expected, or an output that would replace an input."""
+
+
+class ConvergenceError(SolverError, RuntimeError):
+    """An iterative solver did not converge within its bounded effort; the message says what was tried.
+
+    Not bad input: the command-line tool reports it with its own exit code (3)."""
 
 
 class MissingDependencyError(HamsaError, ImportError):

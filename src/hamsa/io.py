@@ -3,7 +3,8 @@
 The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
 correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
 unindexed triangles, so identical coordinates are merged in the order they first appear.
-Every writer goes through a temporary file in the destination folder and an atomic rename, so an
+Files are read and written through :mod:`hamsa.files`: only regular files, never more than its read
+limit (gzip included), and every writer goes through a temporary file and an atomic rename, so an
 interrupted write never leaves a half-written mesh behind.
 """
 
@@ -12,14 +13,13 @@ from __future__ import annotations
 import gzip
 import os
 import struct
-import tempfile
 import warnings
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from hamsa.errors import MeshError, RepairWarning
+from hamsa.errors import FileAccessError, MeshError, RepairWarning
+from hamsa.files import atomic_write, read_bytes
 from hamsa.mesh import TriMesh
 
 FORMATS = ("off", "obj", "ply", "stl")
@@ -83,16 +83,9 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """
     fmt, gzipped = mesh_format(path)
     try:
-        with open(path, "rb") as handle:
-            data = handle.read()
-        if gzipped:
-            data = gzip.decompress(data)
-    except FileNotFoundError:
-        raise MeshError(f"cannot read '{path}': no such file") from None
-    except IsADirectoryError:
-        raise MeshError(f"cannot read '{path}': it is a folder") from None
-    except (OSError, EOFError) as exc:
-        raise MeshError(f"cannot read '{path}': {exc}") from None
+        data = read_bytes(path, decompress="gzip" if gzipped else None)
+    except FileAccessError as exc:
+        raise MeshError(str(exc)) from None
     if not data.strip():
         raise MeshError(f"cannot read '{path}': the file is empty")
     reader = {"off": _read_off, "obj": _read_obj, "ply": _read_ply, "stl": _read_stl}[fmt]
@@ -117,29 +110,6 @@ def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> None:
         data = gzip.compress(data, mtime=0)
     with atomic_write(path) as handle:
         handle.write(data)
-
-
-_UMASK = os.umask(0)
-os.umask(_UMASK)
-
-
-@contextmanager
-def atomic_write(path: str | os.PathLike, mode: str = "wb"):
-    """Open a temporary file beside ``path``; rename it onto ``path`` only if the block succeeds."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise MeshError(f"cannot write '{path}': folder '{folder}' does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, mode) as handle:
-            yield handle
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes it private; the output gets the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 # ------------------------------------------------------------------------------------ text
@@ -168,6 +138,9 @@ def _fixed_width(lines: list[str], width: int, what: str) -> np.ndarray:
 def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
     if rows.size and not np.all(rows == np.round(rows)):
         raise MeshError(f"{what} indices must be integers")
+    too_large = np.flatnonzero(np.abs(rows).max(axis=1) >= 2**53) if rows.size else []
+    if len(too_large):
+        raise MeshError(f"{what} {too_large[0]} has an index out of range ({rows[too_large[0]].max():.4g})")
     return rows.astype(np.int64)
 
 
@@ -232,6 +205,8 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         bad = next(i for i, f in enumerate(face_lines) if len(f) != 3)
         raise MeshError(f"face {bad} has {len(face_lines[bad])} vertices; hamsa needs a triangle mesh")
     flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
+    if flat and max(abs(min(flat)), abs(max(flat))) >= 2**53:
+        raise MeshError(f"face index {max(flat, key=abs)} is out of range")
     faces = np.asarray(flat, dtype=np.int64).reshape(-1, 3)
     # OBJ indices are 1-based; negative indices count back from the current end of the vertex list
     # (here: the whole list, which is exact for files that define all vertices before the faces).

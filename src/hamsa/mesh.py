@@ -20,6 +20,9 @@ from hamsa.errors import MeshError
 # A face is "zero-area" when its area is below this fraction of its longest edge squared, i.e. its
 # smallest angle is below ~2e-12 rad: degenerate up to floating-point noise.
 _DEGENERATE_AREA_RATIO = 1e-12
+# Cotangent weights square cross products (fourth powers of coordinates): beyond ~1e77 they overflow
+# float64, so coordinates are bounded well below that.
+_LARGEST_COORDINATE = 1e60
 
 
 def _first(indices: np.ndarray, limit: int = 5) -> str:
@@ -273,6 +276,8 @@ def as_trimesh(mesh_like) -> TriMesh:
 
 # ----------------------------------------------------------------------------------- helpers
 def _as_vertices(vertices) -> np.ndarray:
+    if np.iscomplexobj(vertices):
+        raise MeshError("vertices must be real numbers, got complex ones")
     try:
         v = np.array(vertices, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -283,7 +288,10 @@ def _as_vertices(vertices) -> np.ndarray:
 
 
 def _as_faces(faces) -> np.ndarray:
-    f = np.asarray(faces)
+    try:
+        f = np.asarray(faces)
+    except (TypeError, ValueError) as exc:  # ragged lists
+        raise MeshError(f"faces are not an (m, 3) integer array: {exc}") from None
     if f.size == 0:
         f = f.reshape(0, 3) if f.ndim < 2 else f
     if f.ndim != 2 or f.shape[1] != 3:
@@ -292,6 +300,8 @@ def _as_faces(faces) -> np.ndarray:
         raise MeshError(f"faces must have shape (m, 3), got {f.shape}")
     if f.size and not np.issubdtype(f.dtype, np.integer):
         raise MeshError(f"face indices must be integers, got dtype {f.dtype}")
+    if f.size and f.dtype.kind == "u" and f.max() > np.iinfo(np.int64).max:
+        raise MeshError(f"face index {f.max()} is out of range")
     return np.array(f, dtype=np.int64)
 
 
@@ -337,8 +347,11 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     if len(bad):
         raise MeshError(f"{len(bad)} vertices have non-finite coordinates (NaN or Inf): {_first(bad)}")
     big = np.abs(vertices).max()
-    if big > 1e150:
-        raise MeshError(f"coordinates as large as {big:.3g} overflow area computations; rescale the mesh")
+    if big > _LARGEST_COORDINATE:
+        raise MeshError(
+            f"coordinates as large as {big:.3g} overflow the geometry in float64 (the limit is "
+            f"{_LARGEST_COORDINATE:.0e}); rescale the mesh"
+        )
     low, high = faces.min(axis=1), faces.max(axis=1)
     bad = np.flatnonzero(low < 0)
     if len(bad):

@@ -170,6 +170,8 @@ MAX_POTENTIAL_RATIO = 1e12
 
 def check_potential(potential, n: int) -> np.ndarray:
     """Return ``potential`` as a finite float64 array of length n, or raise PotentialError."""
+    if np.iscomplexobj(potential):
+        raise PotentialError("potential must be real, got complex values")
     try:
         v = np.asarray(potential, dtype=np.float64)
     except (TypeError, ValueError) as exc:

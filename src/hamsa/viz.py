@@ -113,7 +113,7 @@ def render_fields(
         plotter.close()
     from PIL import Image
 
-    from hamsa.io import atomic_write
+    from hamsa.files import atomic_write
 
     with atomic_write(path, "wb") as handle:
         Image.fromarray(image).save(handle, format="PNG")
@@ -211,7 +211,7 @@ def to_html(
         import plotly.graph_objects as go
     except ImportError:
         raise MissingDependencyError("interactive views need plotly: pip install 'hamsa[viz]'") from None
-    from hamsa.io import atomic_write
+    from hamsa.files import atomic_write
 
     mesh = as_trimesh(mesh)
     if isinstance(fields, dict):

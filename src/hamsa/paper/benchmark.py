@@ -43,8 +43,8 @@ from hamsa.datasets import Dataset, cached_eigenbasis
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
+from hamsa.files import atomic_write
 from hamsa.geodesic import geodesic_distance
-from hamsa.io import atomic_write
 from hamsa.matching import match, resolve_signs, resolve_signs_without_truth
 from hamsa.mesh import TriMesh
 

@@ -28,7 +28,7 @@ from types import SimpleNamespace
 from hamsa import __version__
 from hamsa.cache import content_key, load_record, save_record
 from hamsa.errors import HamsaError
-from hamsa.io import atomic_write
+from hamsa.files import atomic_write
 from hamsa.paper.claims import evaluate_claims
 from hamsa.paper.experiments import EXPERIMENTS, Experiment
 from hamsa.paper.experiments import _common as common

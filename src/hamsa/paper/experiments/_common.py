@@ -10,7 +10,7 @@ import numpy as np
 
 import hamsa
 from hamsa.cache import save_record
-from hamsa.io import atomic_write
+from hamsa.files import atomic_write
 
 
 def parse_args(description: str, argv=None) -> argparse.Namespace:
