@@ -248,14 +248,14 @@ def _parser() -> argparse.ArgumentParser:
 
 def _load_potential(path: str, n: int) -> np.ndarray:
     from hamsa.errors import PotentialError
-    from hamsa.files import load_array, read_bytes
+    from hamsa.files import load_array, read_text
     from hamsa.operators import check_potential
 
     try:
         if path.endswith(".npy"):
             values = load_array(path, ndim=(1, 2), rows=n)
         else:
-            values = np.loadtxt(io.BytesIO(read_bytes(path)), ndmin=1)
+            values = np.loadtxt(io.StringIO(read_text(path)), ndmin=1)
     except HamsaError as exc:
         raise PotentialError(f"potential: {exc}") from None
     except ValueError as exc:

@@ -244,11 +244,14 @@ class Eigenbasis:
 
 def _real_array(values, name: str) -> np.ndarray:
     """``values`` as a float64 array, refusing complex, string and ragged input (HamsaError)."""
-    if np.iscomplexobj(values):
-        raise HamsaError(f"{name} must be real, got complex numbers")
     try:
-        return np.asarray(values, dtype=np.float64)
+        array = np.asarray(values)
+        if np.iscomplexobj(array):
+            raise HamsaError(f"{name} must be real, got complex numbers")
+        return array.astype(np.float64, copy=False)
     except (TypeError, ValueError) as exc:
+        if isinstance(exc, HamsaError):
+            raise
         raise HamsaError(f"{name} must be an array of real numbers: {exc}") from None
 
 

@@ -62,6 +62,9 @@ def _too_large(path, limit: int, stage: str = "") -> FileAccessError:
     )
 
 
+_BINARY_MAGIC = {b"PK\x03\x04": "an .npz (zip) archive", b"\x93NUMPY": "an .npy array", b"\x1f\x8b": "gzip-compressed"}
+
+
 def read_bytes(path: str | os.PathLike, *, limit: int | None = None, decompress: str | None = None) -> bytes:
     """The content of a regular file, at most ``limit`` bytes (default :func:`read_limit`).
 
@@ -95,8 +98,29 @@ def read_bytes(path: str | os.PathLike, *, limit: int | None = None, decompress:
     if len(data) > limit:
         raise _too_large(path, limit)
     if decompress == "gzip":
-        data = bounded_decompress(data, "gzip", limit, path)
+        try:
+            data = bounded_decompress(data, "gzip", limit, path)
+        except _Overflow:
+            raise _too_large(path, limit, " once decompressed (gzip)") from None
     return data
+
+
+def read_text(path: str | os.PathLike, *, limit: int | None = None) -> str:
+    """The content of a UTF-8 text file, read like :func:`read_bytes`; a binary file (an array, an archive,
+    anything with NUL bytes or invalid UTF-8) is refused with a FileAccessError that says what it looks like."""
+    data = read_bytes(path, limit=limit)
+    kind = next((name for magic, name in _BINARY_MAGIC.items() if data.startswith(magic)), None)
+    try:
+        text = None if kind or b"\0" in data else data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = None
+    if text is None:
+        raise FileAccessError(f"'{path}' is {kind or 'a binary file'}, not text")
+    return text
+
+
+class _Overflow(FileAccessError):
+    """Decompressed data went past its limit."""
 
 
 def bounded_decompress(data: bytes, kind: str, limit: int, what="data") -> bytes:
@@ -113,7 +137,7 @@ def bounded_decompress(data: bytes, kind: str, limit: int, what="data") -> bytes
     except (OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
         raise FileAccessError(f"'{what}' is not a valid {kind} stream: {exc}") from None
     if len(out) > limit:
-        raise _too_large(what, limit, f" once decompressed ({kind})")
+        raise _Overflow(f"'{what}' decompresses to more than {limit} bytes")
     return out
 
 

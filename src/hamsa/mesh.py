@@ -276,12 +276,14 @@ def as_trimesh(mesh_like) -> TriMesh:
 
 # ----------------------------------------------------------------------------------- helpers
 def _as_vertices(vertices) -> np.ndarray:
-    if np.iscomplexobj(vertices):
-        raise MeshError("vertices must be real numbers, got complex ones")
     try:
-        v = np.array(vertices, dtype=np.float64)
+        v = np.asarray(vertices)
+        complex_values = np.iscomplexobj(v)
+        v = None if complex_values else np.array(v, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise MeshError(f"vertices are not a numeric (n, 3) array: {exc}") from None
+    if complex_values:
+        raise MeshError("vertices must be real numbers, got complex ones")
     if v.ndim != 2 or v.shape[1] != 3:
         raise MeshError(f"vertices must have shape (n, 3), got {v.shape}")
     return v

@@ -170,12 +170,14 @@ MAX_POTENTIAL_RATIO = 1e12
 
 def check_potential(potential, n: int) -> np.ndarray:
     """Return ``potential`` as a finite float64 array of length n, or raise PotentialError."""
-    if np.iscomplexobj(potential):
-        raise PotentialError("potential must be real, got complex values")
     try:
-        v = np.asarray(potential, dtype=np.float64)
+        v = np.asarray(potential)
+        complex_values = np.iscomplexobj(v)
+        v = None if complex_values else v.astype(np.float64, copy=False)
     except (TypeError, ValueError) as exc:
         raise PotentialError(f"potential is not numeric: {exc}") from None
+    if complex_values:
+        raise PotentialError("potential must be real, got complex values")
     if v.ndim == 2 and 1 in v.shape:
         v = v.ravel()
     if v.shape != (n,):
