@@ -117,3 +117,40 @@ def test_tosca_gorilla_with_its_loose_pieces(k):
     relative = np.linalg.norm(residual, axis=0) / np.linalg.norm(A @ basis.vectors, axis=0)
     assert relative.max() < 1e-6 * scale  # |H x - E A x| against the spectrum's scale
     assert basis.info.seconds < 60
+
+
+@pytest.mark.parametrize("dense_fits", [True, False])
+def test_a_stalled_krylov_solve_falls_back_and_says_so(monkeypatch, dense_fits):
+    """When the Krylov solver stalls the dense solve (or, where it would not fit, ARPACK) takes over with
+    the same answer, and SolveInfo records why."""
+    from hamsa import eigen
+    from hamsa.errors import ConvergenceError
+    from hamsa.operators import mass_matrix, stiffness_matrix
+
+    def stalls(*args, **kwargs):
+        raise ConvergenceError("did not converge in 0 restarts")
+
+    mesh = shapes.icosphere(3)  # 642 vertices
+    W, A = stiffness_matrix(mesh), mass_matrix(mesh)
+    monkeypatch.setattr(eigen, "_block_krylov", stalls)
+    if not dense_fits:
+        monkeypatch.setattr(eigen, "_DENSE_LIMIT_N", 100)
+    values, vectors, info = eigen.generalized_eigsh(W, A, 12, method="krylov")
+    reference = sla.eigh(W.toarray(), A.toarray(), eigvals_only=True, subset_by_index=[0, 11])
+    np.testing.assert_allclose(values, reference, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(vectors.T @ (A @ vectors), np.eye(12), atol=1e-8)
+    assert info.method == ("dense" if dense_fits else "arpack") and info.fallback.startswith("krylov stalled")
+
+
+def test_k_close_to_n_is_a_dense_solve_when_it_fits_and_refused_before_any_work_otherwise(monkeypatch):
+    from hamsa import resources
+    from hamsa.errors import ResourceError
+
+    mesh = shapes.icosphere(2)  # 162 vertices
+    basis = hamsa.eigenbasis(mesh, mesh.n_vertices)  # k = n
+    W, A = hamsa.stiffness_matrix(mesh).toarray(), hamsa.mass_matrix(mesh).toarray()
+    np.testing.assert_allclose(basis.values, sla.eigh(W, A, eigvals_only=True), rtol=1e-8, atol=1e-10)
+    assert basis.info.method == "dense"
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**5)  # 100 kB: 2 dense 162 x 162 do not fit
+    with pytest.raises(ResourceError, match="dense eigensolve of n = 162"):
+        hamsa.eigenbasis(mesh, mesh.n_vertices)

@@ -331,6 +331,8 @@ def _basis(args) -> None:
         f"solver          {basis.info.method}, {basis.info.solves} solves, {basis.info.cycles} cycles, "
         f"max relative residual {basis.info.max_residual:.1e}"
     )
+    if basis.info.fallback:
+        print(f"fallback        {basis.info.method}: {basis.info.fallback}")
     print(f"time            load {loaded - start:.2f} s, solve {solved - loaded:.2f} s, save {done - solved:.2f} s")
     print(f"wrote           {output}")
 

@@ -35,16 +35,17 @@ from __future__ import annotations
 
 import hashlib
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from hamsa.chebyshev import residual_floor
-from hamsa.errors import ConvergenceError, HamsaError, SolverError
+from hamsa.errors import ConvergenceError, HamsaError, ResourceError, SolverError
 from hamsa.factorization import CholeskySolver
 from hamsa.files import atomic_write, load_npz
 from hamsa.mesh import as_trimesh
@@ -60,7 +61,8 @@ _FORMAT_VERSION = 1
 @dataclass(frozen=True)
 class SolveInfo:
     """What a solve did: the method, restart cycles (Chebyshev: filter iterations), sparse solves
-    (Chebyshev: sparse matrix-vector products, counted per column), the largest relative residual, time."""
+    (Chebyshev: sparse matrix-vector products, counted per column), the largest relative residual, time,
+    and, when the requested method stalled and a slower one took over, why (``fallback``)."""
 
     method: str
     cycles: int = 0
@@ -68,6 +70,7 @@ class SolveInfo:
     max_residual: float = 0.0
     seconds: float = 0.0
     shift: float = 0.0
+    fallback: str = ""  # why a slower method replaced the requested one ("" when none did)
 
 
 @dataclass(frozen=True, eq=False)
@@ -372,7 +375,7 @@ def generalized_eigsh(
     initial: np.ndarray | None = None,
     spectral_scale: float | None = None,
     factor: CholeskySolver | None = None,
-    max_cycles: int = 200,
+    max_cycles: int = 50,
     device: str = "cpu",
 ) -> tuple[np.ndarray, np.ndarray, SolveInfo]:
     """The k smallest eigenpairs of a sparse symmetric pencil ``H x = E A x`` with A positive definite.
@@ -389,6 +392,9 @@ def generalized_eigsh(
         lower bound. Estimated from the matrices when omitted.
     factor : CholeskySolver, optional
         A reusable factorization object; it is re-factored with ``H - sigma A``.
+    max_cycles : int
+        Thick restarts of the Krylov solver before it counts as stalled (it usually needs 2-5). A stalled
+        solve falls back to a dense solve where that fits, else to ARPACK, and ``info.fallback`` says so.
     method, tol, backend, initial, device
         As in :func:`eigenbasis`.
 
@@ -397,6 +403,15 @@ def generalized_eigsh(
     values : (k,) ascending
     vectors : (n, k) with ``vectors.T @ A @ vectors = I`` and fixed signs
     info : SolveInfo
+
+    Raises
+    ------
+    SolverError
+        For an impossible request (k outside 1..n, mismatched shapes, a dense solve beyond n = 20000).
+    ResourceError
+        When the solve would not fit in memory (checked before the work starts).
+    ConvergenceError
+        When the Krylov solver stalls and its fallback does not converge either.
     """
     n = H.shape[0]
     if H.shape != (n, n) or A.shape != (n, n):
@@ -424,15 +439,40 @@ def generalized_eigsh(
         values, vectors = _dense_eigh(H, A, k)
         info = SolveInfo(method="dense")
     else:
-        values, vectors, info = _block_krylov(
-            H, A, k, shift=lower_bound - spectral_scale, tol=tol, backend=backend, initial=initial, factor=factor,
-            max_cycles=max_cycles, spectral_scale=spectral_scale,
-        )  # fmt: skip
+        shift = lower_bound - spectral_scale
+        try:
+            values, vectors, info = _block_krylov(
+                H, A, k, shift=shift, tol=tol, backend=backend, initial=initial, factor=factor,
+                max_cycles=max_cycles, spectral_scale=spectral_scale,
+            )  # fmt: skip
+        except ConvergenceError as stalled:
+            values, vectors, info = _fallback(H, A, k, shift, tol, spectral_scale, str(stalled))
     fix_signs(vectors)
+    return values, vectors, replace(info, seconds=time.perf_counter() - start)
+
+
+def _fallback(H, A, k: int, shift: float, tol: float, spectral_scale: float, stalled: str):
+    """When the block Krylov solver stalls: a dense solve where it fits, else ARPACK (scipy's eigsh) in
+    shift-invert mode about the same shift. ``SolveInfo.fallback`` says why; ConvergenceError if both fail."""
+    n = H.shape[0]
+    if n <= _DENSE_LIMIT_N:
+        try:
+            values, vectors = _dense_eigh(H, A, k)
+            return values, vectors, SolveInfo("dense", fallback=f"krylov stalled ({stalled})")
+        except ResourceError:
+            pass
+    try:
+        values, vectors = spla.eigsh(H, k, M=A, sigma=shift, which="LM", tol=tol, maxiter=max(300, 10 * k))
+    except spla.ArpackNoConvergence:
+        raise ConvergenceError(f"{stalled}; ARPACK (scipy eigsh) did not converge either") from None
+    order = np.argsort(values)
+    values, vectors = values[order], vectors[:, order]
+    residual = np.linalg.norm(H @ vectors - (A @ vectors) * values, axis=0) / np.linalg.norm(A @ vectors, axis=0)
+    largest = float(np.max(residual / np.maximum(np.abs(values), residual_floor(values, spectral_scale))))
     return (
         values,
         vectors,
-        SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start, info.shift),
+        SolveInfo("arpack", max_residual=largest, shift=shift, fallback=f"krylov stalled ({stalled})"),
     )
 
 
@@ -472,6 +512,7 @@ def _by_components(H, A, k: int, labels: np.ndarray, initial, options: dict):
         max(f[3].max_residual for f in found),
         time.perf_counter() - start,
         largest.shift,
+        "; ".join(sorted({f[3].fallback for f in found if f[3].fallback})),
     )
     return values[order], X, info
 
@@ -849,7 +890,7 @@ class HamiltonianEigensolver:
                 H, self.mass, self.k, self.tol, self.device, self._block, self.spectral_scale or 0.0, return_block=True
             )
             fix_signs(vectors)
-            info = SolveInfo(info.method, info.cycles, info.solves, info.max_residual, time.perf_counter() - start)
+            info = replace(info, seconds=time.perf_counter() - start)
         else:
             values, vectors, info = generalized_eigsh(
                 H,
