@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from hamsa.errors import ConvergenceError, MissingDependencyError, SolverError
+from hamsa.resources import require_memory
 
 DEVICES = ("cpu", "cuda")
 _MAX_AMPLIFICATION = 1e8
@@ -107,6 +108,8 @@ def chebyshev_eigsh(
     m = min(k + guard, n)
     if not 1 <= k <= m:
         raise SolverError(f"k = {k} eigenpairs requested, must be between 1 and the number of vertices n = {n}")
+    if device == "cpu":  # the block, its image, the filter's three-term recurrence and the Ritz rotation
+        require_memory(8 * 6 * n * m, f"the Chebyshev block of {m} columns on n = {n}")
     scale = 1.0 / np.sqrt(mass_diagonal)
     M, upper = _symmetric_operator(H, scale)
     if device == "cuda":

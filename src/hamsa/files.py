@@ -277,6 +277,8 @@ def check_output_folder(path: str | os.PathLike) -> Path:
     parent = folder.parent if str(folder.parent) else Path(".")
     if not folder.is_dir() and not parent.is_dir():
         raise FileAccessError(f"cannot write '{folder}': folder '{parent}' does not exist")
+    if not os.access(folder if folder.is_dir() else parent, os.W_OK | os.X_OK):
+        raise FileAccessError(f"cannot write into '{folder}': not writable")
     return folder
 
 

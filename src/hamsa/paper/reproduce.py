@@ -95,6 +95,11 @@ def run_experiment(experiment: Experiment, output: Path, data: str | None, quick
     return {**state, "cached": False}
 
 
+def _names(name: str, given: str) -> bool:
+    """Whether ``given`` names the experiment ``name``: all of it, or its start up to an underscore."""
+    return name == given or name.startswith(given.rstrip("_") + "_")
+
+
 def reproduce(
     output,
     data: str | None = None,
@@ -111,7 +116,8 @@ def reproduce(
     data : a folder laid out like shared/data (TOSCA, SCAPE, classic, hand); None: built-in shapes
     quick : smaller sizes (the CI and ``make demo`` setting)
     force : re-run experiments even when their cached results are intact
-    only : names (or name prefixes like ``fig7``) of the experiments to run; default all
+    only : names of the experiments to run, whole or up to an underscore (``fig1`` is
+        ``fig1_harmonics_1d``, not ``fig10_matching``); default all
     progress : show a progress bar over the experiments
 
     Returns
@@ -122,7 +128,7 @@ def reproduce(
     output = Path(output)
     if data is not None and not Path(data).is_dir():
         raise HamsaError(f"data folder '{data}' does not exist")
-    chosen = [e for e in EXPERIMENTS if not only or any(e.name.startswith(o) for o in only)]
+    chosen = [e for e in EXPERIMENTS if not only or any(_names(e.name, o) for o in only)]
     if not chosen:
         names = ", ".join(e.name for e in EXPERIMENTS)
         raise HamsaError(f"no experiment matches {only}; known: {names}")
