@@ -151,6 +151,6 @@ def test_k_close_to_n_is_a_dense_solve_when_it_fits_and_refused_before_any_work_
     W, A = hamsa.stiffness_matrix(mesh).toarray(), hamsa.mass_matrix(mesh).toarray()
     np.testing.assert_allclose(basis.values, sla.eigh(W, A, eigvals_only=True), rtol=1e-8, atol=1e-10)
     assert basis.info.method == "dense"
-    monkeypatch.setattr(resources, "available_memory", lambda: 10**5)  # 100 kB: 2 dense 162 x 162 do not fit
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**5)  # 100 kB: dense 162 x 162 matrices do not fit
     with pytest.raises(ResourceError, match="dense eigensolve of n = 162"):
         hamsa.eigenbasis(mesh, mesh.n_vertices)

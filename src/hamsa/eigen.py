@@ -462,7 +462,9 @@ def _fallback(H, A, k: int, shift: float, tol: float, spectral_scale: float, sta
         except ResourceError:
             pass
     try:
-        values, vectors = spla.eigsh(H, k, M=A, sigma=shift, which="LM", tol=tol, maxiter=max(300, 10 * k))
+        start = np.random.default_rng(12345).standard_normal(n)  # deterministic; a wide basis for multiplets
+        values, vectors = spla.eigsh(H, k, M=A, sigma=shift, which="LM", tol=tol, maxiter=max(300, 10 * k),
+                                     ncv=min(n, 3 * k + 20), v0=start)  # fmt: skip
     except spla.ArpackNoConvergence:
         raise ConvergenceError(f"{stalled}; ARPACK (scipy eigsh) did not converge either") from None
     order = np.argsort(values)
@@ -528,26 +530,18 @@ def _resolve_method(method: str, device: str, n: int, k: int) -> str:
 def _dense_eigh(H, A, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The k smallest pairs by a dense LAPACK solve: the policy for small meshes and for k close to n.
 
-    A lumped (diagonal) mass is folded into the matrix, ``D^-1/2 H D^-1/2 y = E y`` with ``psi = D^-1/2 y``
-    (one dense matrix instead of two). The memory check counts the dense matrices, LAPACK's copy and the
-    eigenvectors; a solve that does not fit, or n > 20000, is refused before anything is allocated.
+    The memory check counts what the solve allocates — the two dense matrices, LAPACK's copies of them and
+    the eigenvectors — and refuses, before anything is allocated, a solve that does not fit or n > 20000.
     """
     n = H.shape[0]
-    mass = _MassOperator(A)
-    lumped = mass.is_diagonal
-    need = 8 * ((2 if lumped else 4) * n * n + 2 * n * k)
+    need = 8 * (4 * n * n + 2 * n * k)
     if n > _DENSE_LIMIT_N:
         raise SolverError(
             f"k = {k} of n = {n} needs a dense eigensolve ({need / 1e9:.0f} GB): ask for fewer than n/3 eigenpairs "
             "to use the sparse solver"
         )
     require_memory(need, f"a dense eigensolve of n = {n} (k = {k})")
-    if not lumped:
-        return sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
-    scale = 1.0 / np.sqrt(mass.diagonal)
-    values, vectors = sla.eigh((sp.diags(scale) @ H @ sp.diags(scale)).toarray(), subset_by_index=[0, k - 1],
-                               overwrite_a=True, check_finite=False)  # fmt: skip
-    return values, vectors * scale[:, None]
+    return sla.eigh(H.toarray(), A.toarray(), subset_by_index=[0, k - 1])
 
 
 def _chebyshev(H, A, k, tol, device, initial, spectral_scale, return_block=False):
