@@ -459,3 +459,27 @@ def test_intrinsic_symmetry_signs_find_a_reflection_of_a_rectangle():
     keep = ~((centroids[:, 0] > 1.4) & (centroids[:, 1] > 0.4))
     cut, _ = hamsa.TriMesh(plate.vertices, plate.faces[keep]).without_unreferenced()
     assert intrinsic_symmetry_signs(hamsa.eigenbasis(cut, 16), k=15)[1] > 0.01  # measured 0.031
+
+
+@pytest.mark.parametrize("method", ["fmap", "icskm"])
+def test_cli_match_with_repair_answers_in_the_inputs_vertex_ids(tmp_path, pair, method):
+    """Source with a loose triangle after its vertices, target with an unreferenced vertex before its own:
+    --repair drops both, and the saved map is in the input ids (-1 for the loose triangle's vertices); the
+    landmarks are given in input ids too."""
+    from hamsa.cli import main
+
+    flat, rolled = pair
+    n = flat.n_vertices
+    loose = np.array([[5.0, 5.0, 5.0], [6.0, 5.0, 5.0], [5.0, 6.0, 5.0]])
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([flat.vertices, loose]), np.vstack([flat.faces, [[n, n + 1, n + 2]]])),
+                    tmp_path / "source.off")  # fmt: skip
+    hamsa.save_mesh(
+        hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], rolled.vertices]), rolled.faces + 1), tmp_path / "target.off"
+    )
+    out = tmp_path / "map.npy"
+    command = ["match", str(tmp_path / "source.off"), str(tmp_path / "target.off"), "--method", method, "--repair"]
+    assert main(command + (["--landmarks", "0:1"] if method == "icskm" else []) + ["-o", str(out)]) == 0
+    mapping = np.load(out)
+    assert mapping.shape == (n + 3,) and np.all(mapping[n:] == -1) and mapping[:n].min() >= 1
+    errors = geodesic_errors(rolled, mapping[:n] - 1, np.arange(n))
+    assert summary(errors)["within_0.05"] > 0.9

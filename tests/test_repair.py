@@ -104,3 +104,9 @@ def test_load_mesh_repair_warns_and_cli_refuses_then_repairs(tmp_path, ico):
         two,
     )
     assert main(["basis", str(two), "-k", "4", "-o", str(out)]) == 2
+    # --repair keeps the largest piece (the copy that comes second, equal areas tie to it): the saved basis
+    # maps its rows back to the input's vertices
+    assert main(["basis", str(two), "-k", "4", "--repair", "-o", str(out)]) == 0
+    with np.load(out) as saved:
+        np.testing.assert_array_equal(saved["vertex_ids"], ico.n_vertices + np.arange(ico.n_vertices))
+    assert hamsa.Eigenbasis.load(out).n == ico.n_vertices

@@ -12,6 +12,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,18 +39,29 @@ REPAIR_HELP = (
 )
 
 
-def _load_for_operators(path: str, repair: bool):
-    """A mesh fit for spectral work, or a MeshError naming the defect and the --repair fix."""
+class _Loaded(NamedTuple):
+    """A mesh fit for spectral work; after ``--repair``, ``vertex_ids`` (n,) gives the input vertex of each of
+    its vertices (None when the mesh is the input's), and ``input_vertices`` is the input's vertex count."""
+
+    mesh: object
+    vertex_ids: np.ndarray | None
+    input_vertices: int
+
+
+def _load_for_operators(path: str, repair: bool) -> _Loaded:
+    """The mesh of ``path`` fit for spectral work, or a MeshError naming the defect and the --repair fix."""
     from hamsa.io import load_mesh
 
     if repair:
         from hamsa.io import read_mesh_arrays
         from hamsa.repair import repair_mesh
 
-        mesh, _, report = repair_mesh(*read_mesh_arrays(path), keep="largest")
-        if report.changed:
-            print(f"{path}: {report}")
-        return mesh
+        vertices, faces = read_mesh_arrays(path)
+        mesh, kept, report = repair_mesh(vertices, faces, keep="largest")
+        if not report.changed:
+            return _Loaded(mesh, None, len(vertices))
+        print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
+        return _Loaded(mesh, kept, len(vertices))
     mesh = load_mesh(path)
     hint = "(--repair fixes it)"
     if len(mesh.unreferenced_vertices):
@@ -68,7 +80,7 @@ def _load_for_operators(path: str, repair: bool):
             f"'{path}' has {count} disconnected pieces ({', '.join(map(str, sizes[:5]))} vertices); --repair keeps "
             "the largest, the Python API handles several"
         )
-    return mesh
+    return _Loaded(mesh, None, mesh.n_vertices)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -162,6 +174,11 @@ def _parser() -> argparse.ArgumentParser:
         default=1.0,
         help="icskm: scale s of the Hamiltonian basis, V = s x geodesic distance from the landmarks in [0, 1] "
         "(default 1; 0 = the LBO)",
+    )
+    match.add_argument(
+        "--repair",
+        action="store_true",
+        help=REPAIR_HELP + "; the map is saved in the inputs' vertex ids (-1 for source vertices removed)",
     )
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
@@ -300,9 +317,7 @@ def _info(args) -> None:
     print(f"Euler char.     {chi}{genus}")
     defects = []
     if len(mesh.unreferenced_vertices):
-        defects.append(
-            f"{len(mesh.unreferenced_vertices)} unreferenced vertices (drop with mesh.without_unreferenced())"
-        )
+        defects.append(f"{len(mesh.unreferenced_vertices)} unreferenced vertices (--repair drops them)")
     if len(mesh.non_manifold_vertices):
         defects.append(f"{len(mesh.non_manifold_vertices)} non-manifold vertices")
     if not mesh.is_consistently_oriented:
@@ -315,14 +330,14 @@ def _basis(args) -> None:
 
     output = _output_path(args, ".npz", args.mesh, args.potential)
     start = time.perf_counter()
-    mesh = _load_for_operators(args.mesh, args.repair)
+    mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
     loaded = time.perf_counter()
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
     basis = eigenbasis(
         mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian, device=args.device
     )
     solved = time.perf_counter()
-    basis.save(output)
+    basis.save(output, extra=None if vertex_ids is None else {"vertex_ids": vertex_ids})
     done = time.perf_counter()
     kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
     print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")
@@ -342,7 +357,7 @@ def _optimize(args) -> None:
     from hamsa.optimize import optimize_potential
 
     output = _output_path(args, ".npy", args.mesh, args.data)
-    mesh = _load_for_operators(args.mesh, args.repair)
+    mesh = _load_for_operators(args.mesh, args.repair).mesh
     if args.data:
         data = load_array(args.data, ndim=(1, 2), rows=mesh.n_vertices)
     else:
@@ -375,7 +390,7 @@ def _compress(args) -> None:
     from hamsa.files import atomic_write
 
     output = _output_path(args, None, args.mesh)
-    mesh = _load_for_operators(args.mesh, args.repair)
+    mesh = _load_for_operators(args.mesh, args.repair).mesh
     start = time.perf_counter()
     data = compression.encode(mesh, args.k, args.bits, args.method)
     with atomic_write(output) as handle:
@@ -418,7 +433,7 @@ def _modes(args) -> None:
     from hamsa.files import atomic_write
 
     output = _output_path(args, ".npz", args.mesh)
-    mesh = _load_for_operators(args.mesh, args.repair)
+    mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
     if args.unit_area:
         mesh = mesh.scaled_to_unit_area()
 
@@ -442,6 +457,7 @@ def _modes(args) -> None:
             objective=result.objective,
             mu=result.mu,
             iterations=np.asarray(result.iterations),
+            **({} if vertex_ids is None else {"vertex_ids": vertex_ids}),
         )
     print(
         f"{args.k} compressed modes, mu = {args.mu:g}: objective {result.objective:.6g}, "
@@ -459,8 +475,12 @@ def _match(args) -> None:
 
     output = _output_path(args, ".npy", args.source, args.target)
     start = time.perf_counter()
-    meshes = [load_mesh(path).scaled_to_unit_area() for path in (args.source, args.target)]  # comparable spectra
-    landmarks = _landmark_pairs(args.landmarks, meshes) if args.method == "icskm" else None
+    if args.repair:
+        loaded = [_load_for_operators(path, True) for path in (args.source, args.target)]
+    else:
+        loaded = [_Loaded(mesh, None, mesh.n_vertices) for mesh in map(load_mesh, (args.source, args.target))]
+    meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
+    landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
@@ -473,17 +493,39 @@ def _match(args) -> None:
     else:
         source, target = (eigenbasis(mesh, k) for mesh in meshes)
     mapping = match(source, target, args.method, landmarks=landmarks, meshes=meshes)
+    mapped = len(mapping)
+    if loaded[0].vertex_ids is not None or loaded[1].vertex_ids is not None:
+        mapping = _in_input_ids(mapping, *loaded)
+        print(f"map in input vertex ids; {int(np.sum(mapping < 0))} source vertices removed by --repair map to -1")
     with atomic_write(output) as handle:
         np.save(handle, mapping)
     print(
-        f"{args.method}: mapped {len(mapping)} source vertices onto {meshes[1].n_vertices} target vertices "
+        f"{args.method}: mapped {mapped} source vertices onto {meshes[1].n_vertices} target vertices "
         f"(k = {k}) in {time.perf_counter() - start:.1f} s"
     )
     print(f"wrote           {output}")
 
 
-def _landmark_pairs(texts, meshes) -> tuple[np.ndarray, np.ndarray]:
-    """'S:T' strings -> (source ids, target ids), checked against the two meshes."""
+def _in_input_ids(mapping: np.ndarray, source: _Loaded, target: _Loaded) -> np.ndarray:
+    """A map between repaired meshes as one between the inputs: (input source vertices,) input target ids,
+    -1 for source vertices the repair removed (a split vertex takes its first copy's image)."""
+    source_ids = np.arange(len(mapping)) if source.vertex_ids is None else source.vertex_ids
+    target_ids = np.arange(target.mesh.n_vertices) if target.vertex_ids is None else target.vertex_ids
+    result = np.full(source.input_vertices, -1, dtype=np.int64)
+    result[source_ids[::-1]] = target_ids[mapping][::-1]  # reversed: the first copy is written last
+    return result
+
+
+def _to_repaired(vertex: int, loaded: _Loaded) -> int:
+    """The repaired mesh's vertex for an input vertex id (its first copy), or -1 if the repair removed it."""
+    if loaded.vertex_ids is None:
+        return vertex
+    hits = np.flatnonzero(loaded.vertex_ids == vertex)
+    return int(hits[0]) if len(hits) else -1
+
+
+def _landmark_pairs(texts, loaded) -> tuple[np.ndarray, np.ndarray]:
+    """'S:T' strings (input vertex ids) -> (source ids, target ids) in the meshes used, checked."""
     if not texts:
         raise HamsaError("--method icskm needs --landmarks S:T [S:T ...] (known source:target vertex pairs)")
     pairs = []
@@ -492,10 +534,14 @@ def _landmark_pairs(texts, meshes) -> tuple[np.ndarray, np.ndarray]:
             s, t = (int(part) for part in text.split(":"))
         except ValueError:
             raise HamsaError(f"landmark {text!r} is not 'source_vertex:target_vertex' (two integers)") from None
-        for vertex, mesh, side in ((s, meshes[0], "source"), (t, meshes[1], "target")):
-            if not 0 <= vertex < mesh.n_vertices:
-                raise HamsaError(f"landmark {text!r}: {side} vertex {vertex} is not in 0..{mesh.n_vertices - 1}")
-        pairs.append((s, t))
+        pair = []
+        for vertex, item, side in ((s, loaded[0], "source"), (t, loaded[1], "target")):
+            if not 0 <= vertex < item.input_vertices:
+                raise HamsaError(f"landmark {text!r}: {side} vertex {vertex} is not in 0..{item.input_vertices - 1}")
+            pair.append(_to_repaired(vertex, item))
+            if pair[-1] < 0:
+                raise HamsaError(f"landmark {text!r}: {side} vertex {vertex} was removed by --repair")
+        pairs.append(pair)
     ids = np.array(pairs, dtype=np.int64)
     return ids[:, 0], ids[:, 1]
 
@@ -545,7 +591,7 @@ def _view(args) -> None:
     from hamsa.viz import to_html
 
     output = _output_path(args, ".html", args.mesh, args.potential)
-    mesh = _load_for_operators(args.mesh, args.repair)
+    mesh = _load_for_operators(args.mesh, args.repair).mesh
     potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
     basis = eigenbasis(mesh, args.k, potential)
     fields = {} if potential is None else {"potential V": potential}
