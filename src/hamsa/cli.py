@@ -260,7 +260,34 @@ def _parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
     demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
+    for command in commands.choices.values():
+        command.add_argument("-q", "--quiet", action="store_true", help="no progress output on stderr")
     return parser
+
+
+class _Steps:
+    """The steps of a long command as one progress line on stderr (the current step and the time so far);
+    silent with ``--quiet`` or when stderr is not a terminal. ``steps("name")`` starts the next step."""
+
+    def __init__(self, args, total: int):
+        from tqdm import tqdm
+
+        quiet = getattr(args, "quiet", False) or not sys.stderr.isatty()
+        self.bar = tqdm(total=total, disable=quiet, file=sys.stderr, leave=False,
+                        bar_format="{desc} ({n}/{total}, {elapsed})")  # fmt: skip
+        self.started = False
+
+    def __call__(self, name: str) -> None:
+        if self.started:
+            self.bar.update()
+        self.started = True
+        self.bar.set_description_str(name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.bar.close()
 
 
 def _load_potential(path: str, n: int) -> np.ndarray:
@@ -330,14 +357,18 @@ def _basis(args) -> None:
 
     output = _output_path(args, ".npz", args.mesh, args.potential)
     start = time.perf_counter()
-    mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
-    loaded = time.perf_counter()
-    potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
-    basis = eigenbasis(
-        mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian, device=args.device
-    )
-    solved = time.perf_counter()
-    basis.save(output, extra=None if vertex_ids is None else {"vertex_ids": vertex_ids})
+    with _Steps(args, 3) as step:
+        step(f"reading {Path(args.mesh).name}")
+        mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
+        loaded = time.perf_counter()
+        potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+        step(f"solving for {args.k} eigenpairs of n = {mesh.n_vertices}")
+        basis = eigenbasis(
+            mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian, device=args.device
+        )
+        solved = time.perf_counter()
+        step(f"writing {output.name}")
+        basis.save(output, extra=None if vertex_ids is None else {"vertex_ids": vertex_ids})
     done = time.perf_counter()
     kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
     print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")
@@ -370,7 +401,7 @@ def _optimize(args) -> None:
         m=args.m,
         parametrization="square" if args.square else "signed",
         max_iterations=args.iterations,
-        progress=sys.stderr.isatty(),
+        progress=sys.stderr.isatty() and not args.quiet,
     )
     with atomic_write(output) as handle:
         np.save(handle, result.potential)
@@ -438,6 +469,8 @@ def _modes(args) -> None:
         mesh = mesh.scaled_to_unit_area()
 
     def report(stage, index, iterations, objective):
+        if args.quiet:
+            return
         if stage == "admm":
             if iterations % 100 == 0:
                 print(f"  ADMM iteration {iterations}: objective {objective:.6g}", file=sys.stderr, flush=True)
@@ -475,24 +508,29 @@ def _match(args) -> None:
 
     output = _output_path(args, ".npy", args.source, args.target)
     start = time.perf_counter()
-    if args.repair:
-        loaded = [_load_for_operators(path, True) for path in (args.source, args.target)]
-    else:
-        loaded = [_Loaded(mesh, None, mesh.n_vertices) for mesh in map(load_mesh, (args.source, args.target))]
-    meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
-    landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
-    if args.method == "icskm" and args.landmark_scale != 0:
-        V = [
-            args.landmark_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
-            for m, ids in zip(meshes, landmarks)
-        ]
-        source, target = (eigenbasis(mesh, k, v) for mesh, v in zip(meshes, V))
-    else:
-        source, target = (eigenbasis(mesh, k) for mesh in meshes)
-    mapping = match(source, target, args.method, landmarks=landmarks, meshes=meshes)
+    with _Steps(args, 4) as step:
+        step("reading the meshes")
+        if args.repair:
+            loaded = [_load_for_operators(path, True) for path in (args.source, args.target)]
+        else:
+            loaded = [_Loaded(mesh, None, mesh.n_vertices) for mesh in map(load_mesh, (args.source, args.target))]
+        meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
+        landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
+        V = [None, None]
+        if args.method == "icskm" and args.landmark_scale != 0:
+            V = [
+                args.landmark_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
+                for m, ids in zip(meshes, landmarks)
+            ]
+        bases = []
+        for side, mesh, potential in zip(("source", "target"), meshes, V):
+            step(f"{side} eigenbasis (k = {k}, n = {mesh.n_vertices})")
+            bases.append(eigenbasis(mesh, k, potential))
+        step(f"matching ({args.method})")
+        mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes)
     mapped = len(mapping)
     if loaded[0].vertex_ids is not None or loaded[1].vertex_ids is not None:
         mapping = _in_input_ids(mapping, *loaded)
