@@ -329,3 +329,33 @@ def test_ctrl_c_during_start_up_is_one_line(tmp_path, delay):
     _, stderr = process.communicate(timeout=60)
     lines = [line for line in stderr.splitlines() if line.strip() and not line.startswith("reproduce:")]
     assert process.returncode == 130 and lines == ["hamsa: interrupted"]
+
+
+def test_vertex_ids_travel_with_the_basis_and_are_validated(tmp_path, basis):
+    ids = np.arange(basis.n)[::-1].copy()
+    path = tmp_path / "b.npz"
+    basis.with_vertex_ids(ids).truncate(3).save(path)
+    back = hamsa.Eigenbasis.load(path)
+    np.testing.assert_array_equal(back.vertex_ids, ids)
+    assert back.k == 3 and hamsa.Eigenbasis.load(_saved(tmp_path, basis)).vertex_ids is None
+    for bad in (ids[:-1], ids - 5, ids * 1.0):
+        with pytest.raises(HamsaError, match="vertex_ids must be"):
+            basis.with_vertex_ids(bad)
+    _rewrite(path, vertex_ids=-np.ones(basis.n, dtype=np.int64))
+    with pytest.raises(HamsaError, match="vertex_ids must be"):
+        hamsa.Eigenbasis.load(path)
+
+
+def _saved(folder, basis):
+    path = folder / "plain.npz"
+    basis.save(path)
+    return path
+
+
+def test_an_intrinsic_delaunay_basis_loads_back(tmp_path, sphere):
+    pytest.importorskip("robust_laplacian")
+    basis = hamsa.eigenbasis(sphere, 5, laplacian="intrinsic_delaunay")
+    basis.save(tmp_path / "b.npz")
+    back = hamsa.Eigenbasis.load(tmp_path / "b.npz")
+    assert back.mass_kind == "intrinsic_delaunay"
+    np.testing.assert_array_equal(back.values, basis.values)

@@ -368,7 +368,7 @@ def _basis(args) -> None:
         )
         solved = time.perf_counter()
         step(f"writing {output.name}")
-        basis.save(output, extra=None if vertex_ids is None else {"vertex_ids": vertex_ids})
+        (basis if vertex_ids is None else basis.with_vertex_ids(vertex_ids)).save(output)
     done = time.perf_counter()
     kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
     print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")

@@ -49,7 +49,7 @@ from hamsa.errors import ConvergenceError, HamsaError, ResourceError, SolverErro
 from hamsa.factorization import CholeskySolver
 from hamsa.files import atomic_write, load_npz
 from hamsa.mesh import as_trimesh
-from hamsa.operators import MASS_KINDS, check_potential, hamiltonian
+from hamsa.operators import LAPLACIANS, MASS_KINDS, check_potential, hamiltonian
 from hamsa.resources import require_memory
 
 METHODS = ("auto", "krylov", "dense", "chebyshev")
@@ -89,6 +89,9 @@ class Eigenbasis:
         The potential V (None for the Laplace-Beltrami operator, V = 0).
     mass_kind : str
     info : SolveInfo
+    vertex_ids : (n,) int64 or None
+        For a basis of a repaired or reduced mesh, the vertex of the original mesh each row belongs to (a
+        split vertex's copies share one); None when row i is vertex i. Saved and loaded with the basis.
     """
 
     values: np.ndarray
@@ -97,6 +100,7 @@ class Eigenbasis:
     potential: np.ndarray | None = None
     mass_kind: str = "voronoi"
     info: SolveInfo = field(default_factory=lambda: SolveInfo(method="loaded"))
+    vertex_ids: np.ndarray | None = None
 
     @property
     def k(self) -> int:
@@ -128,7 +132,12 @@ class Eigenbasis:
         """The first k eigenpairs."""
         if not 1 <= k <= self.k:
             raise HamsaError(f"cannot truncate a basis of {self.k} eigenpairs to {k}")
-        return Eigenbasis(self.values[:k], self.vectors[:, :k], self.mass, self.potential, self.mass_kind, self.info)
+        return replace(self, values=self.values[:k], vectors=self.vectors[:, :k])
+
+    def with_vertex_ids(self, vertex_ids) -> Eigenbasis:
+        """The same basis, recording the original vertex of each row (see ``vertex_ids``), e.g. the ``kept``
+        array of :func:`hamsa.repair.repair_mesh`. Raises HamsaError unless it is (n,) non-negative integers."""
+        return replace(self, vertex_ids=_vertex_ids(vertex_ids, self.n))
 
     def save(self, path, extra: dict | None = None) -> None:
         """Write to an ``.npz`` file atomically (temporary file + rename); ``extra`` arrays ride along."""
@@ -145,6 +154,8 @@ class Eigenbasis:
         }
         if self.potential is not None:
             arrays["potential"] = self.potential
+        if self.vertex_ids is not None:
+            arrays["vertex_ids"] = self.vertex_ids
         arrays["checksum"] = np.array(_checksum(arrays))
         arrays.update(extra or {})
         with atomic_write(path, "wb") as handle:
@@ -215,7 +226,7 @@ class Eigenbasis:
         """
         real = {"ndim": 1, "numeric": True}
         arrays = load_npz(path, {"values": real, "vectors": {"ndim": 2, "numeric": True}, "mass_data": real,
-                                 "mass_indices": real, "mass_indptr": real, "potential": real,
+                                 "mass_indices": real, "mass_indptr": real, "potential": real, "vertex_ids": real,
                                  "format_version": {"ndim": 0, "numeric": True}})  # fmt: skip
         missing = [name for name in ("format_version", "values", "vectors", "mass_kind") if name not in arrays]
         missing += [name for name in ("mass_data", "mass_indices", "mass_indptr") if name not in arrays]
@@ -227,13 +238,13 @@ class Eigenbasis:
         if "checksum" in arrays and str(arrays["checksum"]) != _checksum(arrays):
             raise HamsaError(f"'{path}' is corrupt: its arrays do not match their SHA-256 checksum")
         kind = str(arrays["mass_kind"])
-        if kind not in MASS_KINDS:
-            raise HamsaError(f"'{path}' has mass kind {kind!r}, expected one of {MASS_KINDS}")
+        if kind not in MASS_KINDS + LAPLACIANS:  # "intrinsic_delaunay": that Laplacian's lumped mass
+            raise HamsaError(f"'{path}' has mass kind {kind!r}, expected one of {MASS_KINDS + LAPLACIANS[1:]}")
         vectors = np.asarray(arrays["vectors"], dtype=np.float64)
         try:
             mass = _csr_matrix(arrays["mass_data"], arrays["mass_indices"], arrays["mass_indptr"], vectors.shape[0])
             potential = arrays.get("potential")
-            return cls._validated(
+            basis = cls._validated(
                 np.asarray(arrays["values"], dtype=np.float64),
                 vectors,
                 mass,
@@ -241,8 +252,16 @@ class Eigenbasis:
                 kind,
                 SolveInfo(method="loaded"),
             )
+            return basis if "vertex_ids" not in arrays else basis.with_vertex_ids(arrays["vertex_ids"])
         except HamsaError as exc:
             raise HamsaError(f"'{path}' is not a valid eigenbasis: {exc}") from None
+
+
+def _vertex_ids(vertex_ids, n: int) -> np.ndarray:
+    ids = np.asarray(vertex_ids)
+    if ids.shape != (n,) or ids.dtype.kind not in "iu" or (n and ids.min() < 0):
+        raise HamsaError(f"vertex_ids must be ({n},) non-negative integers, got {ids.shape} {ids.dtype}")
+    return ids.astype(np.int64)
 
 
 def _real_array(values, name: str) -> np.ndarray:
@@ -271,7 +290,7 @@ def _csr_matrix(data, indices, indptr, n: int) -> sp.csr_matrix:
     return sp.csr_matrix((data.astype(np.float64), indices.astype(np.int64), indptr.astype(np.int64)), shape=(n, n))
 
 
-_CHECKED = ("values", "vectors", "mass_data", "mass_indices", "mass_indptr", "potential")
+_CHECKED = ("values", "vectors", "mass_data", "mass_indices", "mass_indptr", "potential", "vertex_ids")
 
 
 def _checksum(arrays) -> str:
