@@ -7,9 +7,6 @@ import errno
 import gzip
 import hashlib
 import os
-import signal
-import subprocess
-import sys
 import time
 import zlib
 
@@ -318,34 +315,6 @@ def test_cli_potential_files_are_checked_from_their_header(tmp_path, capsys):
     errors = capsys.readouterr().err
     assert "expected 42 rows" in errors and "complex" in errors and "expected 1-D or 2-D" in errors
     assert not (tmp_path / "b.npz").exists()
-
-
-def _wait_until_mapped(pid: int, library: str, timeout: float = 60.0) -> None:
-    """Wait until process ``pid`` has loaded a shared library whose path contains ``library``."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            with open(f"/proc/{pid}/maps") as maps:
-                if library in maps.read():
-                    return
-        except OSError:
-            pass
-        time.sleep(0.005)
-    raise AssertionError(f"{library} never loaded")
-
-
-@pytest.mark.skipif(not os.path.exists("/proc/self/maps"), reason="needs /proc to see where start-up is")
-@pytest.mark.parametrize("library", ["_multiarray_umath", "_sparsetools"])
-def test_ctrl_c_during_start_up_is_one_line(tmp_path, library):
-    """Ctrl-C while the command is still importing numpy's or scipy's compiled modules (not at a fixed
-    delay, which a loaded machine would turn into Python's own start-up)."""
-    process = subprocess.Popen([sys.executable, "-m", "hamsa", "reproduce", "--quick", "-o", str(tmp_path / "r")],
-                               stderr=subprocess.PIPE, text=True)  # fmt: skip
-    _wait_until_mapped(process.pid, library)
-    process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=60)
-    lines = [line for line in stderr.splitlines() if line.strip() and not line.startswith("reproduce:")]
-    assert process.returncode == 130 and lines == ["hamsa: interrupted"]
 
 
 def test_vertex_ids_travel_with_the_basis_and_are_validated(tmp_path, basis):

@@ -3,6 +3,9 @@ hostile mesh file must end in a HamsaError subclass, never another exception."""
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -43,3 +46,17 @@ def test_every_hostile_mesh_file_raises_a_mesh_error(tmp_path, monkeypatch):
         assert mesh.n_vertices < 5 or name in hostile_inputs.REPAIRABLE, name
     expected = set(names) - set(hostile_inputs.REPAIRABLE) - {"needle.off", "single_triangle.off"}
     assert expected <= refused, sorted(expected - refused)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/maps"), reason="needs /proc to see where start-up is")
+@pytest.mark.parametrize("library", ["_multiarray_umath", "_sparsetools"])
+def test_ctrl_c_during_start_up_is_one_line(tmp_path, library):
+    """Ctrl-C while the command is still importing numpy's or scipy's compiled modules (not at a fixed
+    delay, which a loaded machine would turn into Python's own start-up)."""
+    process = subprocess.Popen([sys.executable, "-m", "hamsa", "reproduce", "--quick", "-o", str(tmp_path / "r")],
+                               stderr=subprocess.PIPE, text=True)  # fmt: skip
+    hostile_inputs.wait_until_mapped(process.pid, library)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    lines = [line for line in stderr.splitlines() if line.strip() and not line.startswith("reproduce:")]
+    assert process.returncode == 130 and lines == ["hamsa: interrupted"]
