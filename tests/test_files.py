@@ -345,3 +345,10 @@ def test_an_intrinsic_delaunay_basis_loads_back(tmp_path, sphere):
     back = hamsa.Eigenbasis.load(tmp_path / "b.npz")
     assert back.mass_kind == "intrinsic_delaunay"
     np.testing.assert_array_equal(back.values, basis.values)
+
+
+def test_extra_arrays_come_back_from_one_read(tmp_path, basis):
+    basis.save(tmp_path / "b.npz", extra={"cache_key": np.array("abc"), "labels": np.arange(3)})
+    back, extra = hamsa.Eigenbasis.load_with_extra(tmp_path / "b.npz")
+    assert sorted(extra) == ["cache_key", "labels"] and str(extra["cache_key"]) == "abc"
+    np.testing.assert_array_equal(back.values, basis.values)

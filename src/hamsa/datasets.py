@@ -21,7 +21,6 @@ import numpy as np
 from hamsa.cache import content_key
 from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.files import load_npz
 from hamsa.io import load_mesh
 from hamsa.mesh import TriMesh, as_trimesh
 
@@ -157,8 +156,8 @@ def cached_eigenbasis(mesh, k: int, cache_dir, potential=None, mass: str = "voro
     path = folder / f"{key[:32]}.npz"
     if path.exists():
         try:
-            basis = Eigenbasis.load(path)
-            stored = load_npz(path).get("cache_key")
+            basis, extra = Eigenbasis.load_with_extra(path)
+            stored = extra.get("cache_key")
             if stored is not None and str(stored) == key and basis.k == k and basis.n == mesh.n_vertices:
                 return basis
         except HamsaError:

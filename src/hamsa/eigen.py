@@ -224,6 +224,12 @@ class Eigenbasis:
         mass's index arrays must be in range, and the arrays must match their stored SHA-256 checksum.
         Raises HamsaError (:class:`~hamsa.errors.FileAccessError` for an unreadable or oversized file).
         """
+        return cls.load_with_extra(path)[0]
+
+    @classmethod
+    def load_with_extra(cls, path) -> tuple[Eigenbasis, dict]:
+        """:meth:`load`, and the ``extra`` arrays that :meth:`save` wrote beside the basis (name -> array),
+        from one read of the file."""
         real = {"ndim": 1, "numeric": True}
         arrays = load_npz(path, {"values": real, "vectors": {"ndim": 2, "numeric": True}, "mass_data": real,
                                  "mass_indices": real, "mass_indptr": real, "potential": real, "vertex_ids": real,
@@ -252,9 +258,12 @@ class Eigenbasis:
                 kind,
                 SolveInfo(method="loaded"),
             )
-            return basis if "vertex_ids" not in arrays else basis.with_vertex_ids(arrays["vertex_ids"])
+            if "vertex_ids" in arrays:
+                basis = basis.with_vertex_ids(arrays["vertex_ids"])
         except HamsaError as exc:
             raise HamsaError(f"'{path}' is not a valid eigenbasis: {exc}") from None
+        own = {*_CHECKED, "format_version", "mass_kind", "checksum"}
+        return basis, {name: array for name, array in arrays.items() if name not in own}
 
 
 def _vertex_ids(vertex_ids, n: int) -> np.ndarray:
