@@ -107,3 +107,56 @@ def test_bad_triangulation_breaks_cotan_but_not_the_intrinsic_delaunay_laplacian
     t = 1e-4
     heat_intrinsic = sla.spsolve((A + t * intrinsic).tocsc(), A @ source)
     assert heat_intrinsic.min() >= -1e-12
+
+
+def open_book(pages: int = 3, n: int = 16) -> hamsa.TriMesh:
+    """``pages`` unit squares glued along one spine edge (non-manifold edges all along it), n x n cells each."""
+    t = np.linspace(0, 1, n + 1)
+    vertices, faces = [np.stack([np.zeros(n + 1), np.zeros(n + 1), t], 1)], []
+
+    def index(page, i, j):  # i: steps away from the spine (0 = on it), j: steps up
+        return j if i == 0 else n + 1 + page * n * (n + 1) + (i - 1) * (n + 1) + j
+
+    for page in range(pages):
+        angle = 2 * np.pi * page / pages
+        d, h = np.meshgrid(t[1:], t, indexing="ij")
+        vertices.append(np.stack([d.ravel() * np.cos(angle), d.ravel() * np.sin(angle), h.ravel()], 1))
+        for i in range(n):
+            for j in range(n):
+                a, b, c, e = index(page, i, j), index(page, i + 1, j), index(page, i + 1, j + 1), index(page, i, j + 1)
+                faces += [[a, b, c], [a, c, e]] if (i + j) % 2 == 0 else [[a, b, e], [b, c, e]]
+    return hamsa.TriMesh(np.concatenate(vertices), faces, manifold=False)
+
+
+def test_tufted_laplacian_equals_cotan_on_a_delaunay_mesh():
+    from hamsa.operators import intrinsic_delaunay_operators
+
+    mesh = hamsa.shapes.icosphere(3)  # near-equilateral: every edge is Delaunay, no flip happens
+    W, _ = intrinsic_delaunay_operators(mesh, mollify=0.0)
+    assert abs(W - stiffness_matrix(mesh)).max() < 1e-10
+    W_tufted, _ = hamiltonian(mesh, laplacian="tufted")
+    assert abs(W_tufted - stiffness_matrix(mesh)).max() < 1e-4  # the default mollification moves it slightly
+
+
+def test_tufted_laplacian_on_an_open_book_is_psd_and_has_the_kirchhoff_spectrum():
+    """Three unit pages on one spine: continuity across the spine and zero total flux give the spectrum
+    pi^2 (m^2 + l^2) (symmetric across the pages) and pi^2 ((m + 1/2)^2 + l^2) twice (antisymmetric)."""
+    book = open_book()
+    assert len(book.non_manifold_edges) == 16 and not book.is_edge_manifold
+    W, A = hamiltonian(book, laplacian="tufted")
+    assert np.abs(W - W.T).max() < 1e-12
+    assert np.linalg.eigvalsh(W.toarray()).min() > -1e-12 * abs(W).max()
+    assert abs(A.diagonal().sum() - 3.0) < 1e-9  # three unit squares
+    basis = hamsa.eigenbasis(book, 10, laplacian="tufted")
+    exact = np.pi**2 * np.array([0, 0.25, 0.25, 1, 1, 1.25, 1.25, 2, 2.25, 2.25])
+    np.testing.assert_allclose(basis.values[1:], exact[1:], rtol=0.01)
+    assert basis.n == book.n_vertices  # vertex ids unchanged: no repair, no splitting
+
+
+def test_the_cotan_and_intrinsic_delaunay_laplacians_refuse_non_manifold_edges():
+    book = open_book(n=2)
+    for laplacian in ("cotan", "intrinsic_delaunay"):
+        with pytest.raises(hamsa.MeshError, match="laplacian='tufted'"):
+            hamiltonian(book, laplacian=laplacian)
+    with pytest.raises(hamsa.MeshError, match="manifold=False"):
+        hamsa.TriMesh(book.vertices, book.faces)

@@ -1,6 +1,6 @@
 """hamsa: Hamiltonian spectral shape analysis.
 
-The Hamiltonian ``H = -Laplacian + V`` on triangle meshes, discretized with linear finite elements as
+The Hamiltonian ``H = -Laplacian + V`` on triangle meshes and point clouds, discretized with linear finite elements as
 ``(W + A diag(V)) psi = E A psi``, and the spectral tools built on its eigenbasis. ``import hamsa`` gives
 the library's submodules (``hamsa.diffusion``, ``hamsa.matching``, ...); the paper's reproduction is
 ``hamsa.paper`` (imported on demand).
@@ -12,7 +12,8 @@ __version__ = "0.3.0"
 
 _SUBMODULES = (
     "cmm", "compression", "datasets", "diffusion", "errors", "evaluation", "files", "geodesic", "io", "matching",
-    "mesh", "nodal", "noise", "operators", "optimize", "paper", "potentials", "repair", "shapes", "theory", "viz",
+    "mesh", "nodal", "noise", "operators", "optimize", "paper", "pointcloud", "potentials", "repair", "shapes",
+    "theory", "viz",
 )  # fmt: skip
 _NAMES = {
     "Eigenbasis": "hamsa.eigen",
@@ -24,8 +25,10 @@ _NAMES = {
     "PotentialError": "hamsa.errors",
     "SolverError": "hamsa.errors",
     "load_mesh": "hamsa.io",
+    "load_point_cloud": "hamsa.io",
     "save_mesh": "hamsa.io",
     "TriMesh": "hamsa.mesh",
+    "PointCloud": "hamsa.pointcloud",
     "hamiltonian": "hamsa.operators",
     "mass_matrix": "hamsa.operators",
     "stiffness_matrix": "hamsa.operators",
@@ -67,6 +70,7 @@ __all__ = [
     "noise",
     "operators",
     "optimize",
+    "pointcloud",
     "potentials",
     "repair",
     "theory",
@@ -74,6 +78,7 @@ __all__ = [
     "HamsaError",
     "MeshError",
     "MissingDependencyError",
+    "PointCloud",
     "PotentialError",
     "SolverError",
     "TriMesh",
@@ -81,6 +86,7 @@ __all__ = [
     "generalized_eigsh",
     "hamiltonian",
     "load_mesh",
+    "load_point_cloud",
     "mass_matrix",
     "optimize_potential",
     "save_mesh",

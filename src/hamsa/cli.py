@@ -39,6 +39,9 @@ REPAIR_HELP = (
 )
 
 
+POINTS_HELP = "a point cloud (.xyz .pts .txt .npy, or a .ply / .off / .obj without faces)"
+
+
 class _Loaded(NamedTuple):
     """A mesh fit for spectral work; after ``--repair``, ``vertex_ids`` (n,) gives the input vertex of each of
     its vertices (None when the mesh is the input's), and ``input_vertices`` is the input's vertex count."""
@@ -48,10 +51,17 @@ class _Loaded(NamedTuple):
     input_vertices: int
 
 
-def _load_for_operators(path: str, repair: bool) -> _Loaded:
-    """The mesh of ``path`` fit for spectral work, or a MeshError naming the defect and the --repair fix."""
-    from hamsa.io import load_mesh
+def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -> _Loaded:
+    """The mesh (or point cloud) of ``path`` fit for spectral work, or a MeshError naming the defect and the
+    fix. A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud; ``laplacian="tufted"``
+    takes meshes with non-manifold edges, vertices and mixed orientation as they are."""
+    from hamsa.io import is_point_file, load_mesh, load_point_cloud
 
+    if is_point_file(path):
+        if repair:
+            raise HamsaError(f"'{path}' is a point cloud: --repair is for meshes")
+        cloud = load_point_cloud(path)
+        return _Loaded(cloud, None, cloud.n_vertices)
     if repair:
         from hamsa.io import read_mesh_arrays
         from hamsa.repair import repair_mesh
@@ -62,16 +72,17 @@ def _load_for_operators(path: str, repair: bool) -> _Loaded:
             return _Loaded(mesh, None, len(vertices))
         print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
         return _Loaded(mesh, kept, len(vertices))
-    mesh = load_mesh(path)
+    tufted = laplacian == "tufted"
+    mesh = load_mesh(path, manifold=not tufted)
     hint = "(--repair fixes it)"
     if len(mesh.unreferenced_vertices):
         raise MeshError(f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices {hint}")
-    if mesh.non_manifold_vertices.size:
+    if mesh.non_manifold_vertices.size and not tufted:  # the tufted Laplacian is defined on any triangle set
         raise MeshError(
             f"'{path}' has {mesh.non_manifold_vertices.size} non-manifold vertices (first: "
-            f"{int(mesh.non_manifold_vertices[0])}; separate fans of faces meet there) {hint}"
+            f"{int(mesh.non_manifold_vertices[0])}; separate fans of faces meet there) {hint} or --laplacian tufted"
         )
-    if not mesh.is_consistently_oriented:
+    if not mesh.is_consistently_oriented and not tufted:
         raise MeshError(f"'{path}': faces are not consistently oriented {hint}")
     count, labels = mesh.vertex_components
     if count > 1:
@@ -94,10 +105,10 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     info = commands.add_parser("info", help="describe a mesh: size, area, components, boundaries, defects")
-    info.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    info.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
 
     basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
-    basis.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     basis.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     basis.add_argument("-k", type=_positive_int, required=True, help="number of eigenpairs")
     basis.add_argument("--potential", help="potential V: .npy, or a text file with one value per vertex")
@@ -105,9 +116,16 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
     basis.add_argument(
         "--laplacian",
-        choices=("cotan", "intrinsic_delaunay"),
-        default="cotan",
-        help="intrinsic_delaunay: robust to needles and obtuse triangles (needs the [robust] extra)",
+        choices=("cotan", "intrinsic_delaunay", "tufted", "point_cloud"),
+        help="default: cotan for a mesh, point_cloud for a point file; intrinsic_delaunay: robust to needles and "
+        "obtuse triangles; tufted: also meshes with non-manifold edges or vertices, taken as they are (both need "
+        "the [robust] extra)",
+    )
+    basis.add_argument(
+        "--boundary",
+        default="neumann",
+        help="neumann (default), dirichlet (psi = 0 on the mesh's boundary), or a .npy / text file of the vertex "
+        "ids to hold at psi = 0",
     )
     basis.add_argument(
         "--device", choices=("cpu", "cuda"), default="cpu", help="cuda: solve on an NVIDIA GPU (CuPy; [gpu-cuda12])"
@@ -153,8 +171,8 @@ def _parser() -> argparse.ArgumentParser:
     modes.add_argument("-o", "--output", required=True, help="output .npz (modes, objective, mu)")
 
     match = commands.add_parser("match", help="a dense vertex map from SOURCE to TARGET (descriptors, functional maps)")
-    match.add_argument("source", help="source mesh file")
-    match.add_argument("target", help="target mesh file")
+    match.add_argument("source", help=f"source mesh file or {POINTS_HELP}")
+    match.add_argument("target", help=f"target mesh file or {POINTS_HELP}")
     match.add_argument(
         "--method",
         choices=("fmap", "hks", "wks", "icskm"),
@@ -238,7 +256,7 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("-o", "--output", required=True, help="results folder (resumable: finished pairs are kept)")
 
     view = commands.add_parser("view", help="an interactive HTML page of the first eigenfunctions (rotate, switch)")
-    view.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL; .gz too)")
+    view.add_argument("mesh", help=f"mesh file (OFF, OBJ, PLY, STL; .gz too) or {POINTS_HELP}")
     view.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions to show (default 10)")
     view.add_argument("--potential", help=".npy or text file with one potential value per vertex")
@@ -310,6 +328,19 @@ def _load_potential(path: str, n: int) -> np.ndarray:
         raise PotentialError(f"'{path}': {exc}") from None
 
 
+def _load_ids(path: str) -> np.ndarray:
+    """Vertex ids from a .npy file or a text file of integers (whitespace or newline separated)."""
+    from hamsa.files import load_array, read_text
+
+    try:
+        ids = load_array(path, ndim=1) if path.endswith(".npy") else np.loadtxt(io.StringIO(read_text(path)), ndmin=1)
+    except ValueError as exc:
+        raise HamsaError(f"cannot read vertex ids from '{path}': {exc}") from None
+    if ids.size and not np.all(ids == np.round(ids)):
+        raise HamsaError(f"'{path}' holds non-integer vertex ids")
+    return ids.astype(np.int64)
+
+
 def _output_path(args, suffix: str | None = None, *inputs) -> Path:
     """``args.output``, checked before any work is done (:func:`hamsa.files.check_output`): its suffix, that
     it can be written, and that it is none of the command's input files."""
@@ -319,9 +350,18 @@ def _output_path(args, suffix: str | None = None, *inputs) -> Path:
 
 
 def _info(args) -> None:
-    from hamsa.io import load_mesh
+    from hamsa.io import is_point_file, load_mesh, load_point_cloud
 
-    mesh = load_mesh(args.mesh)
+    if is_point_file(args.mesh):
+        cloud = load_point_cloud(args.mesh)
+        print(f"point cloud     {args.mesh}")
+        print(f"points          {cloud.n_vertices}")
+        print(f"area            {cloud.area:.6g} (the point-cloud Laplacian's mass, {cloud.neighbors} neighbours)")
+        print(f"bounding box    diagonal {cloud.bounding_box_diagonal:.6g}")
+        print(f"mean spacing    {cloud.mean_spacing:.6g}")
+        print(f"components      {cloud.n_components}")
+        return
+    mesh = load_mesh(args.mesh, manifold=False)
     loops = mesh.boundary_loops
     print(f"mesh            {args.mesh}")
     print(f"vertices        {mesh.n_vertices}")
@@ -343,6 +383,8 @@ def _info(args) -> None:
     genus = f", genus {(2 - chi) // 2}" if mesh.n_components == 1 and not loops and chi % 2 == 0 else ""
     print(f"Euler char.     {chi}{genus}")
     defects = []
+    if not mesh.is_edge_manifold:
+        defects.append(f"{len(mesh.non_manifold_edges)} non-manifold edges (--laplacian tufted takes them)")
     if len(mesh.unreferenced_vertices):
         defects.append(f"{len(mesh.unreferenced_vertices)} unreferenced vertices (--repair drops them)")
     if len(mesh.non_manifold_vertices):
@@ -354,24 +396,34 @@ def _info(args) -> None:
 
 def _basis(args) -> None:
     from hamsa.eigen import eigenbasis
+    from hamsa.pointcloud import PointCloud
 
     output = _output_path(args, ".npz", args.mesh, args.potential)
     start = time.perf_counter()
     with _Steps(args, 3) as step:
         step(f"reading {Path(args.mesh).name}")
-        mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
+        mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair, args.laplacian)
         loaded = time.perf_counter()
         potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+        boundary = args.boundary if args.boundary in ("neumann", "dirichlet") else _load_ids(args.boundary)
         step(f"solving for {args.k} eigenpairs of n = {mesh.n_vertices}")
         basis = eigenbasis(
-            mesh, args.k, potential, mass=args.mass, backend=args.backend, laplacian=args.laplacian, device=args.device
+            mesh,
+            args.k,
+            potential,
+            mass=args.mass,
+            backend=args.backend,
+            laplacian=args.laplacian,
+            device=args.device,
+            boundary=boundary,
         )
         solved = time.perf_counter()
         step(f"writing {output.name}")
         (basis if vertex_ids is None else basis.with_vertex_ids(vertex_ids)).save(output)
     done = time.perf_counter()
     kind = "LBO (V = 0)" if potential is None else f"Hamiltonian (V in [{potential.min():.4g}, {potential.max():.4g}])"
-    print(f"{kind}, n = {mesh.n_vertices}, k = {args.k}, mass = {args.mass}")
+    shape = "point cloud" if isinstance(mesh, PointCloud) else "mesh"
+    print(f"{kind} on a {shape}, n = {mesh.n_vertices}, k = {args.k}, {basis.mass_kind} mass, {args.boundary} boundary")
     print(f"eigenvalues     {basis.values[0]:.6g} .. {basis.values[-1]:.6g}")
     print(
         f"solver          {basis.info.method}, {basis.info.solves} solves, {basis.info.cycles} cycles, "
@@ -503,7 +555,6 @@ def _match(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.files import atomic_write
     from hamsa.geodesic import geodesic_distance
-    from hamsa.io import load_mesh
     from hamsa.matching import match
 
     output = _output_path(args, ".npy", args.source, args.target)
@@ -513,10 +564,7 @@ def _match(args) -> None:
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
     with _Steps(args, 4) as step:
         step("reading the meshes")
-        if args.repair:
-            loaded = [_load_for_operators(path, True) for path in (args.source, args.target)]
-        else:
-            loaded = [_Loaded(mesh, None, mesh.n_vertices) for mesh in map(load_mesh, (args.source, args.target))]
+        loaded = [_load_shape(path, args.repair) for path in (args.source, args.target)]
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
         landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
         V = [None, None]
@@ -552,6 +600,16 @@ def _in_input_ids(mapping: np.ndarray, source: _Loaded, target: _Loaded) -> np.n
     result = np.full(source.input_vertices, -1, dtype=np.int64)
     result[source_ids[::-1]] = target_ids[mapping][::-1]  # reversed: the first copy is written last
     return result
+
+
+def _load_shape(path: str, repair: bool) -> _Loaded:
+    """A point cloud, a repaired mesh, or the mesh as it is (several pieces allowed) for ``hamsa match``."""
+    from hamsa.io import is_point_file, load_mesh
+
+    if repair or is_point_file(path):
+        return _load_for_operators(path, repair)
+    mesh = load_mesh(path)
+    return _Loaded(mesh, None, mesh.n_vertices)
 
 
 def _to_repaired(vertex: int, loaded: _Loaded) -> int:

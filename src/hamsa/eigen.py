@@ -48,8 +48,16 @@ from hamsa.chebyshev import residual_floor
 from hamsa.errors import ConvergenceError, HamsaError, ResourceError, SolverError
 from hamsa.factorization import CholeskySolver
 from hamsa.files import atomic_write, load_npz
-from hamsa.mesh import as_trimesh
-from hamsa.operators import LAPLACIANS, MASS_KINDS, check_potential, hamiltonian
+from hamsa.operators import (
+    LAPLACIANS,
+    MASS_KINDS,
+    check_potential,
+    default_laplacian,
+    dirichlet_vertices,
+    hamiltonian,
+    laplacian_operators,
+)
+from hamsa.pointcloud import as_shape
 from hamsa.resources import require_memory
 
 METHODS = ("auto", "krylov", "dense", "chebyshev")
@@ -323,18 +331,19 @@ def eigenbasis(
     tol: float = 1e-10,
     backend: str = "auto",
     initial: np.ndarray | None = None,
-    laplacian: str = "cotan",
+    laplacian: str | None = None,
     device: str = "cpu",
+    boundary="neumann",
 ) -> Eigenbasis:
-    """The k smallest eigenpairs of the Hamiltonian ``(W + A diag(V)) psi = E A psi`` on a mesh.
+    """The k smallest eigenpairs of the Hamiltonian ``(W + A diag(V)) psi = E A psi`` on a mesh or point cloud.
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
-        Must have no unreferenced vertices (see :meth:`TriMesh.without_unreferenced`). Several
-        connected components and boundaries (Neumann conditions) are fine.
+    mesh : TriMesh, (vertices, faces) or PointCloud
+        A mesh must have no unreferenced vertices (see :meth:`TriMesh.without_unreferenced`). Several
+        connected components and boundaries are fine.
     k : int
-        Number of eigenpairs, 1 <= k <= n.
+        Number of eigenpairs, 1 <= k <= n (n minus the Dirichlet vertices).
     potential : array_like (n,), optional
         V at each vertex, any sign (None: V = 0, the Laplace-Beltrami operator).
     mass : {"voronoi", "barycentric", "full"}
@@ -351,11 +360,18 @@ def eigenbasis(
         Sparse Cholesky backend (see :mod:`hamsa.factorization`).
     initial : (n, p) array, optional
         Start vectors (e.g. the eigenvectors of a nearby potential): a warm start.
-    laplacian : {"cotan", "intrinsic_delaunay"}
-        "intrinsic_delaunay" for meshes with needles or very obtuse triangles (see
-        :func:`hamsa.operators.intrinsic_delaunay_operators`; the ``[robust]`` extra).
+    laplacian : {"cotan", "intrinsic_delaunay", "tufted", "point_cloud"}, optional
+        The discretization (:func:`hamsa.operators.laplacian_operators`): None is "cotan" for a mesh and
+        "point_cloud" for a cloud; "intrinsic_delaunay" for meshes with needles or very obtuse triangles,
+        "tufted" for meshes with non-manifold edges (both the ``[robust]`` extra).
     device : {"cpu", "cuda"}
         "cuda" solves on an NVIDIA GPU with CuPy (the ``[gpu-cuda12]`` / ``[gpu-cuda13]`` extras).
+    boundary : "neumann", "dirichlet" or array of vertex ids
+        "neumann" (natural, the default): no condition on the boundary. "dirichlet": psi = 0 on the
+        mesh's boundary vertices. An index array: psi = 0 on those vertices (or points), e.g. the
+        boundary of a point cloud or a region cut out of the surface. The problem is solved on the other
+        vertices and the eigenvectors extended by zero (every method). See
+        :func:`hamsa.operators.dirichlet_vertices`.
 
     Returns
     -------
@@ -369,25 +385,39 @@ def eigenbasis(
     >>> basis.values[1:].round(2).tolist()  # unit sphere: l(l+1) = 0 (the constant), then 2 three times
     [2.0, 2.0, 2.0]
     """
-    mesh = as_trimesh(mesh)
+    shape = as_shape(mesh)
     if mass not in MASS_KINDS:
         raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
     if potential is not None:
-        potential = check_potential(potential, mesh.n_vertices)
-    H, A = hamiltonian(mesh, potential, mass, laplacian)
-    lower = float(potential.min()) if potential is not None else 0.0
-    values, vectors, info = generalized_eigsh(
-        H,
-        A,
+        potential = check_potential(potential, shape.n_vertices)
+    laplacian = default_laplacian(shape) if laplacian is None else laplacian
+    H, A = hamiltonian(shape, potential, mass, laplacian)
+    n = shape.n_vertices
+    fixed = dirichlet_vertices(shape, boundary)
+    free = np.setdiff1d(np.arange(n), fixed)
+    if len(free) == 0:
+        raise HamsaError("every vertex is a Dirichlet vertex: nothing is left to solve for")
+    if initial is not None:
+        initial = np.asarray(initial, dtype=np.float64)
+        if initial.ndim not in (1, 2) or initial.shape[0] != n:
+            raise SolverError(f"initial vectors must have shape ({n}, p), got {initial.shape}")
+    restricted = len(fixed) > 0
+    values, free_vectors, info = generalized_eigsh(
+        H[free][:, free] if restricted else H,
+        A[free][:, free] if restricted else A,
         k,
-        lower_bound=lower,
+        lower_bound=float(potential.min()) if potential is not None else 0.0,
         method=method,
         tol=tol,
         backend=backend,
-        initial=initial,
-        spectral_scale=4 * np.pi / mesh.area,
+        initial=initial[free] if restricted and initial is not None else initial,
+        spectral_scale=4 * np.pi / float(A.sum()),
         device=device,
     )
+    vectors = free_vectors
+    if restricted:
+        vectors = np.zeros((n, free_vectors.shape[1]))
+        vectors[free] = free_vectors
     return Eigenbasis(values, vectors, A, potential, mass if laplacian == "cotan" else laplacian, info)
 
 
@@ -881,19 +911,22 @@ class HamiltonianEigensolver:
         self.overlap: np.ndarray | None = None
 
     @classmethod
-    def for_mesh(cls, mesh, k: int, mass: str = "voronoi", **options) -> HamiltonianEigensolver:
-        """A solver on a mesh's cotangent stiffness and lumped mass (``mass`` "voronoi" or "barycentric")."""
-        from hamsa.operators import mass_matrix, stiffness_matrix
-
-        mesh = as_trimesh(mesh)
+    def for_mesh(
+        cls, mesh, k: int, mass: str = "voronoi", laplacian: str | None = None, **options
+    ) -> HamiltonianEigensolver:
+        """A solver on a mesh's (or point cloud's) stiffness and lumped mass (``mass`` "voronoi" or
+        "barycentric"; ``laplacian`` as in :func:`eigenbasis`)."""
         if mass not in ("voronoi", "barycentric"):
             raise HamsaError(f"HamiltonianEigensolver needs a lumped mass ('voronoi' or 'barycentric'), got {mass!r}")
+        shape = as_shape(mesh)
+        laplacian = default_laplacian(shape) if laplacian is None else laplacian
+        stiffness, lumped = laplacian_operators(shape, mass, laplacian)
         return cls(
-            stiffness_matrix(mesh),
-            mass_matrix(mesh, mass),
+            stiffness,
+            lumped,
             k,
-            mass_kind=mass,
-            spectral_scale=4 * np.pi / mesh.area,
+            mass_kind=mass if laplacian == "cotan" else laplacian,
+            spectral_scale=4 * np.pi / float(lumped.sum()),
             **options,
         )
 

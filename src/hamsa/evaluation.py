@@ -6,7 +6,8 @@ true images, divided by the square root of the target's area. The cumulative cur
 fraction of points with error <= r for r in [0, 0.25]. "Symmetries are not allowed" (the paper): only
 the true map counts; ``symmetry=`` gives the symmetry-allowed variant (the smaller of the errors to the
 true image and to its left-right partner). Geodesics are the heat method's (:mod:`hamsa.geodesic`,
-first-order accurate in the edge length), batched over the distinct true images.
+first-order accurate in the edge length; on a point cloud, the point-cloud heat method), batched over the
+distinct true images.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from hamsa.errors import HamsaError
-from hamsa.geodesic import GeodesicSolver
-from hamsa.mesh import as_trimesh
+from hamsa.geodesic import GeodesicSolver, PointCloudGeodesicSolver, geodesic_solver
+from hamsa.pointcloud import as_shape
 
 THRESHOLDS = np.arange(0.0, 0.25 + 1e-12, 0.005)  # Kim et al.'s 0:0.005:0.25
 
@@ -28,19 +29,25 @@ def sample_points(n: int, count: int = 1000, seed: int = 0) -> np.ndarray:
 
 
 def geodesic_errors(
-    target, predicted, ground_truth, *, symmetry=None, solver: GeodesicSolver | None = None, batch: int = 64
+    target,
+    predicted,
+    ground_truth,
+    *,
+    symmetry=None,
+    solver: GeodesicSolver | PointCloudGeodesicSolver | None = None,
+    batch: int = 64,
 ) -> np.ndarray:
     """Normalized geodesic errors ``d_target(predicted_i, truth_i) / sqrt(area(target))``, shape (s,).
 
     Parameters
     ----------
-    target : TriMesh (or pair) on which both maps land
+    target : TriMesh (or pair) or PointCloud on which both maps land
     predicted, ground_truth : (s,) target vertex ids of the same s evaluated source points
     symmetry : (n_target,) optional left-right map of the target: symmetric flips then count as correct
-    solver : a GeodesicSolver of ``target`` to reuse across calls
+    solver : a geodesic solver of ``target`` (:func:`hamsa.geodesic.geodesic_solver`) to reuse across calls
     batch : distinct true images per batched heat-method solve
     """
-    target = as_trimesh(target)
+    target = as_shape(target)
     predicted = np.asarray(predicted)
     truth = np.asarray(ground_truth)
     n = target.n_vertices
@@ -49,7 +56,7 @@ def geodesic_errors(
     for name, ids in (("predicted", predicted), ("ground truth", truth)):
         if ids.size and (not np.issubdtype(ids.dtype, np.integer) or ids.min() < 0 or ids.max() >= n):
             raise HamsaError(f"{name} ids must be integers in [0, {n}) (target vertices)")
-    solver = solver or GeodesicSolver(target)
+    solver = solver or geodesic_solver(target)
     errors = _distances(solver, predicted, truth, batch)
     if symmetry is not None:
         partner = np.asarray(symmetry)
@@ -67,8 +74,8 @@ class TruthDistances:
     ``geodesic_errors(target, predicted, truth)``. Memory: an (n_target, distinct true images) table.
     """
 
-    def __init__(self, target, ground_truth, solver: GeodesicSolver | None = None, batch: int = 64):
-        self.target = as_trimesh(target)
+    def __init__(self, target, ground_truth, solver=None, batch: int = 64):
+        self.target = as_shape(target)
         self.truth = np.asarray(ground_truth)
         n = self.target.n_vertices
         if self.truth.ndim != 1 or (
@@ -77,7 +84,7 @@ class TruthDistances:
         ):  # fmt: skip
             raise HamsaError(f"ground truth must be a 1-D array of target vertex ids in [0, {n})")
         unique, self._column = np.unique(self.truth, return_inverse=True)
-        solver = solver or GeodesicSolver(self.target)
+        solver = solver or geodesic_solver(self.target)
         self._table = np.hstack([solver.distances_from(unique[s : s + batch]) for s in range(0, len(unique), batch)])
 
     def errors(self, predicted) -> np.ndarray:
@@ -90,7 +97,7 @@ class TruthDistances:
         return self._table[predicted, self._column] / np.sqrt(self.target.area)
 
 
-def _distances(solver: GeodesicSolver, predicted: np.ndarray, truth: np.ndarray, batch: int) -> np.ndarray:
+def _distances(solver, predicted: np.ndarray, truth: np.ndarray, batch: int) -> np.ndarray:
     out = np.empty(len(truth))
     unique, inverse = np.unique(truth, return_inverse=True)
     for start in range(0, len(unique), batch):

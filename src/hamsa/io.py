@@ -1,4 +1,5 @@
-"""Reading and writing meshes: OFF, OBJ, PLY (ASCII and binary) and STL, optionally gzip-compressed.
+"""Reading and writing meshes (OFF, OBJ, PLY ASCII and binary, STL) and reading point clouds (XYZ, NPY,
+and the vertices of OFF / OBJ / PLY), optionally gzip-compressed.
 
 The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
 correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
@@ -19,10 +20,68 @@ from pathlib import Path
 import numpy as np
 
 from hamsa.errors import FileAccessError, MeshError, RepairWarning
-from hamsa.files import atomic_write, read_bytes
+from hamsa.files import atomic_write, load_array, read_bytes
 from hamsa.mesh import TriMesh
+from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 
 FORMATS = ("off", "obj", "ply", "stl")
+POINT_FORMATS = ("xyz", "pts", "txt", "npy", "off", "obj", "ply")
+
+
+def point_format(path: str | os.PathLike) -> tuple[str, bool] | None:
+    """(format, gzipped) of a point file (``scan.xyz``, ``points.npy``, ``cloud.ply.gz``), None for other names."""
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    gzipped = bool(suffixes) and suffixes[-1] == ".gz"
+    fmt = suffixes[-2 if gzipped else -1].lstrip(".") if len(suffixes) > gzipped else ""
+    if fmt not in POINT_FORMATS or (fmt == "npy" and gzipped):
+        return None
+    return fmt, gzipped
+
+
+def is_point_file(path: str | os.PathLike) -> bool:
+    """True for a file that holds points without faces: ``.xyz`` / ``.pts`` / ``.txt`` / ``.npy`` by name, or
+    an OFF / OBJ / PLY whose face count is zero. Raises MeshError for a mesh-like file that cannot be read."""
+    fmt = point_format(path)
+    if fmt is None or fmt[0] in ("xyz", "pts", "txt", "npy"):
+        return fmt is not None
+    return len(read_mesh_arrays(path)[1]) == 0
+
+
+def load_point_cloud(path: str | os.PathLike, neighbors: int = DEFAULT_NEIGHBORS) -> PointCloud:
+    """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
+    or commas; further columns such as normals or colours are ignored), ``.npy`` ((n, 3) or wider), or the
+    vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
+
+    Points keep their file order. Raises MeshError naming the file if it cannot be read or parsed, or if
+    the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few, NaN, repeated).
+    """
+    fmt = point_format(path)
+    if fmt is None:
+        raise MeshError(
+            f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .npy .off .obj .ply (optionally .gz)"
+        )
+    kind, gzipped = fmt
+    try:
+        if kind == "npy":
+            points = load_array(path, ndim=2)
+            if points.shape[1] < 3:
+                raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
+            points = points[:, :3]
+        elif kind in ("xyz", "pts", "txt"):
+            text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8")
+            lines = [line.replace(",", " ") for line in _data_lines(text)]
+            if not lines:
+                raise MeshError("no points in the file")
+            points = _fixed_width(lines, 3, "point")
+        else:
+            points = read_mesh_arrays(path)[0]
+        return PointCloud(points, neighbors=neighbors)
+    except FileAccessError as exc:
+        raise MeshError(str(exc)) from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
+    except MeshError as exc:
+        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
 
 
 def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
@@ -37,7 +96,7 @@ def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
     return fmt, gzipped
 
 
-def load_mesh(path: str | os.PathLike, repair: bool = False) -> TriMesh:
+def load_mesh(path: str | os.PathLike, repair: bool = False, *, manifold: bool = True) -> TriMesh:
     """Read a triangle mesh from an OFF, OBJ, PLY or STL file (``*.gz`` is decompressed on the fly).
 
     Parameters
@@ -49,6 +108,9 @@ def load_mesh(path: str | os.PathLike, repair: bool = False) -> TriMesh:
         non-manifold vertices, orientation, unreferenced vertices) instead of refusing such a mesh;
         a :class:`~hamsa.errors.RepairWarning` says what changed. Use
         :func:`hamsa.repair.repair_mesh` directly to get the index map.
+    manifold : bool
+        False accepts edges shared by more than two faces, for ``laplacian="tufted"`` (see :class:`TriMesh`);
+        not with ``repair``.
 
     Returns
     -------
@@ -63,8 +125,10 @@ def load_mesh(path: str | os.PathLike, repair: bool = False) -> TriMesh:
     """
     try:
         vertices, faces = read_mesh_arrays(path)
+        if len(faces) == 0:
+            raise MeshError(f"it has {len(vertices)} vertices and no faces: read a point cloud with load_point_cloud")
         if not repair:
-            return TriMesh(vertices, faces)
+            return TriMesh(vertices, faces, manifold=manifold)
         from hamsa.repair import repair_mesh
 
         mesh, _, report = repair_mesh(vertices, faces)
@@ -262,12 +326,13 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
                 elements[-1]["props"].append((words[2], _ply_type(words[1]), None, None))
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise MeshError(f"unknown PLY format '{fmt}'")
-    names = [e["name"] for e in elements]
-    if "vertex" not in names or "face" not in names:
-        raise MeshError("PLY needs 'vertex' and 'face' elements")
+    if "vertex" not in [e["name"] for e in elements]:
+        raise MeshError("PLY needs a 'vertex' element")
     if fmt == "ascii":
-        return _read_ply_ascii(data[body_start:].decode("ascii"), elements)
-    return _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
+        vertices, faces = _read_ply_ascii(data[body_start:].decode("ascii"), elements)
+    else:
+        vertices, faces = _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
+    return vertices, np.zeros((0, 3), dtype=np.int64) if faces is None else faces  # a point cloud: no faces
 
 
 def _ply_type(name: str) -> str:

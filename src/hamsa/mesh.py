@@ -3,7 +3,8 @@
 A ``TriMesh`` holds ``vertices`` (n, 3) float64 and ``faces`` (m, 3) int64, both read-only.
 Construction validates them and raises :class:`~hamsa.errors.MeshError` naming the first problem:
 non-finite coordinates, out-of-range or negative indices, faces with a repeated vertex,
-zero-area faces, edges shared by more than two faces, duplicate faces, empty meshes.
+zero-area faces, edges shared by more than two faces (unless ``manifold=False``, for the tufted
+Laplacian), duplicate faces, empty meshes.
 Vertex order is never changed: ground-truth correspondences are vertex indices.
 """
 
@@ -39,13 +40,17 @@ class TriMesh:
         Vertex coordinates; converted to float64.
     faces : array_like, shape (m, 3)
         Vertex indices of each triangle (0-based, integer dtype); converted to int64.
+    manifold : bool
+        True (the default) refuses edges shared by more than two faces. False accepts them: such a mesh
+        (a CAD part, a scan with fins) gets operators only from ``laplacian="tufted"``
+        (:func:`hamsa.operators.intrinsic_operators`); the cotan Laplacian refuses it.
 
     Raises
     ------
     MeshError
         If the arrays have the wrong shape or dtype, or the mesh is empty, has non-finite
         coordinates, out-of-range indices, faces with a repeated vertex, zero-area faces,
-        duplicate faces or non-manifold edges (shared by more than two faces).
+        duplicate faces or (with ``manifold=True``) non-manifold edges (shared by more than two faces).
 
     Notes
     -----
@@ -61,14 +66,15 @@ class TriMesh:
     (3, 1, 0.5)
     """
 
-    def __init__(self, vertices, faces):
+    def __init__(self, vertices, faces, *, manifold: bool = True):
         vertices = _as_vertices(vertices)
         faces = _as_faces(faces)
-        _validate(vertices, faces)
+        _validate(vertices, faces, manifold)
         vertices.flags.writeable = False
         faces.flags.writeable = False
         self._vertices = vertices
         self._faces = faces
+        self._manifold = manifold
 
     @property
     def vertices(self) -> np.ndarray:
@@ -89,7 +95,8 @@ class TriMesh:
         return self._faces.shape[0]
 
     def __repr__(self) -> str:
-        return f"TriMesh(n_vertices={self.n_vertices}, n_faces={self.n_faces})"
+        extra = "" if self.is_edge_manifold else f", non_manifold_edges={len(self.non_manifold_edges)}"
+        return f"TriMesh(n_vertices={self.n_vertices}, n_faces={self.n_faces}{extra})"
 
     # ----------------------------------------------------------------------------- geometry
     @cached_property
@@ -123,7 +130,8 @@ class TriMesh:
         Eigenvalues scale as 1 / area, so spectra, heat times and potential scales become comparable
         across shapes; matching and the benchmarks work on unit-area shapes (Kim et al. normalize
         errors by sqrt(area) for the same reason)."""
-        return TriMesh((self._vertices - self._vertices.mean(axis=0)) / np.sqrt(self.area), self._faces)
+        centered = self._vertices - self._vertices.mean(axis=0)
+        return TriMesh(centered / np.sqrt(self.area), self._faces, manifold=self._manifold)
 
     # ------------------------------------------------------------------------- connectivity
     @cached_property
@@ -139,6 +147,16 @@ class TriMesh:
     @cached_property
     def _edge_table(self) -> tuple[np.ndarray, np.ndarray]:
         return _unique_edges(self._faces)
+
+    @cached_property
+    def non_manifold_edges(self) -> np.ndarray:
+        """(b, 2) edges shared by more than two faces (empty unless built with ``manifold=False``)."""
+        return self.edges[self.edge_face_counts > 2]
+
+    @property
+    def is_edge_manifold(self) -> bool:
+        """True when no edge has more than two incident faces."""
+        return len(self.non_manifold_edges) == 0
 
     @cached_property
     def referenced(self) -> np.ndarray:
@@ -226,7 +244,7 @@ class TriMesh:
             return self, kept
         new_index = np.full(self.n_vertices, -1, dtype=np.int64)
         new_index[kept] = np.arange(len(kept))
-        return TriMesh(self._vertices[kept], new_index[self._faces]), kept
+        return TriMesh(self._vertices[kept], new_index[self._faces], manifold=self._manifold), kept
 
     def largest_component(self) -> tuple[TriMesh, np.ndarray]:
         """The connected component with the most vertices, as ``(mesh, kept)`` like
@@ -237,7 +255,7 @@ class TriMesh:
             return self.without_unreferenced()
         biggest = np.argmax(np.bincount(labels[labels >= 0]))
         faces = self._faces[labels[self._faces[:, 0]] == biggest]
-        body, kept = TriMesh(self._vertices, faces).without_unreferenced()
+        body, kept = TriMesh(self._vertices, faces, manifold=self._manifold).without_unreferenced()
         return body, kept
 
     def require_operator_ready(self) -> None:
@@ -341,7 +359,7 @@ def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return edges, counts
 
 
-def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
+def _validate(vertices: np.ndarray, faces: np.ndarray, manifold: bool) -> None:
     n, m = len(vertices), len(faces)
     if n == 0 or m == 0:
         raise MeshError(f"mesh is empty ({n} vertices, {m} faces)")
@@ -382,13 +400,16 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     if np.any(counts > 1):
         dup = np.sort(first_index[counts > 1])
         raise MeshError(f"{int((counts - 1).sum())} duplicate faces (same three vertices), first: face {dup[0]}")
+    if not manifold:
+        return
     edges, counts = _unique_edges(faces)
     bad = np.flatnonzero(counts > 2)
     if len(bad):
         e = edges[bad[0]]
         raise MeshError(
             f"{len(bad)} non-manifold edges (shared by more than two faces), first: edge "
-            f"({e[0]}, {e[1]}) is shared by {counts[bad[0]]} faces"
+            f"({e[0]}, {e[1]}) is shared by {counts[bad[0]]} faces; the tufted Laplacian takes such meshes "
+            "(TriMesh(..., manifold=False) with laplacian='tufted', or hamsa basis --laplacian tufted)"
         )
 
 

@@ -17,8 +17,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from hamsa.errors import HamsaError, MissingDependencyError, PotentialError
+from hamsa.errors import HamsaError, MeshError, MissingDependencyError, PotentialError
 from hamsa.mesh import TriMesh, as_trimesh
+from hamsa.pointcloud import PointCloud, as_shape
 
 MASS_KINDS = ("voronoi", "barycentric", "full")
 
@@ -57,6 +58,7 @@ def stiffness_matrix(mesh) -> sp.csr_matrix:
         and equals ``-igl.cotmatrix(V, F)``.
     """
     mesh = as_trimesh(mesh)
+    _require_edge_manifold(mesh, "cotan")
     cot, _, _ = _corner_geometry(mesh)
     f = mesh.faces
     n = mesh.n_vertices
@@ -188,24 +190,27 @@ def check_potential(potential, n: int) -> np.ndarray:
     return v
 
 
-LAPLACIANS = ("cotan", "intrinsic_delaunay")
+LAPLACIANS = ("cotan", "intrinsic_delaunay", "tufted", "point_cloud")
 
 
 def intrinsic_delaunay_operators(mesh, mollify: float = 1e-5) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """Stiffness and lumped mass of the intrinsic Delaunay triangulation (Sharp & Crane 2020), ``(W, A)``.
+    """Stiffness and lumped mass of the tufted intrinsic Delaunay triangulation (Sharp & Crane 2020), ``(W, A)``.
 
     The same piecewise-flat surface, retriangulated by intrinsic edge flips until every edge is
     Delaunay: all cotangent weights become nonnegative (W is an M-matrix, so diffusion obeys the maximum
-    principle) and needles or very obtuse triangles no longer spoil accuracy. On a mesh that is already
-    Delaunay W equals :func:`stiffness_matrix`. The mass is the intrinsic triangulation's lumped
-    (barycentric) mass; ``mollify`` (a fraction of the mean edge length) lengthens near-degenerate
-    edges first. Needs the ``[robust]`` extra (robust_laplacian).
+    principle) and needles or very obtuse triangles no longer spoil accuracy. The flips run on the
+    mesh's tufted cover (each face doubled, faces around a non-manifold edge glued in a cycle), so the
+    operator is defined, symmetric and PSD for any triangle set: non-manifold edges and vertices and
+    inconsistent orientation included, vertex ids unchanged. On an edge-manifold mesh it is the intrinsic
+    Delaunay Laplacian, and on a mesh that is already Delaunay W equals :func:`stiffness_matrix`. The mass
+    is the intrinsic triangulation's lumped (barycentric) mass; ``mollify`` (a fraction of the mean edge
+    length) lengthens near-degenerate edges first (0: none). Needs the ``[robust]`` extra (robust_laplacian).
     """
     try:
         import robust_laplacian
     except ImportError:
         raise MissingDependencyError(
-            "the intrinsic Delaunay Laplacian needs robust_laplacian: pip install 'hamsa[robust]'"
+            "the intrinsic Delaunay / tufted Laplacian needs robust_laplacian: pip install 'hamsa[robust]'"
         ) from None
     mesh = as_trimesh(mesh)
     mesh.require_operator_ready()
@@ -213,24 +218,128 @@ def intrinsic_delaunay_operators(mesh, mollify: float = 1e-5) -> tuple[sp.csr_ma
     return sp.csr_matrix(W), sp.csr_matrix(A)
 
 
+def default_laplacian(shape) -> str:
+    """ "point_cloud" for a :class:`~hamsa.pointcloud.PointCloud`, "cotan" (the paper's) for a mesh."""
+    return "point_cloud" if isinstance(shape, PointCloud) else "cotan"
+
+
+def laplacian_operators(
+    shape, mass: str = "voronoi", laplacian: str | None = None
+) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """The stiffness W and mass A of a mesh or point cloud for one choice of discretization, ``(W, A)``.
+
+    Parameters
+    ----------
+    shape : TriMesh, (vertices, faces) or PointCloud
+    mass : {"voronoi", "barycentric", "full"}
+        For "cotan" only; the other Laplacians come with their own lumped mass (pass a lumped kind).
+    laplacian : {"cotan", "intrinsic_delaunay", "tufted", "point_cloud"}, optional
+        "cotan": :func:`stiffness_matrix` and :func:`mass_matrix` of the mesh as given (the paper's);
+        "intrinsic_delaunay": :func:`intrinsic_delaunay_operators` of an edge-manifold mesh; "tufted": the
+        same operator for any triangle set, non-manifold edges included; "point_cloud": the operators of
+        a :class:`~hamsa.pointcloud.PointCloud` (Sharp & Crane 2020, sec. 5). None: the shape's default
+        (:func:`default_laplacian`).
+
+    Raises
+    ------
+    HamsaError
+        On an unknown or mismatched choice (a mesh Laplacian for a cloud or the reverse, cotan or
+        intrinsic_delaunay on a mesh with non-manifold edges, a full mass with a non-cotan Laplacian).
+    """
+    shape = as_shape(shape)
+    if mass not in MASS_KINDS:
+        raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
+    laplacian = default_laplacian(shape) if laplacian is None else laplacian
+    if laplacian not in LAPLACIANS:
+        raise HamsaError(f"laplacian must be one of {LAPLACIANS}, got {laplacian!r}")
+    if laplacian != "cotan" and mass == "full":
+        raise HamsaError(f"the {laplacian} Laplacian comes with a lumped mass: use mass='voronoi'")
+    if isinstance(shape, PointCloud):
+        if laplacian != "point_cloud":
+            raise HamsaError(f"a point cloud has no faces for the {laplacian} Laplacian: use laplacian='point_cloud'")
+        return shape.operators
+    if laplacian == "point_cloud":
+        raise HamsaError("laplacian='point_cloud' is for a PointCloud: use hamsa.PointCloud(mesh.vertices)")
+    shape.require_operator_ready()
+    if laplacian == "tufted":
+        return intrinsic_delaunay_operators(shape)
+    if laplacian == "intrinsic_delaunay":
+        _require_edge_manifold(shape, laplacian)
+        return intrinsic_delaunay_operators(shape)
+    return stiffness_matrix(shape), mass_matrix(shape, mass)
+
+
+BOUNDARY_CONDITIONS = ("neumann", "dirichlet")
+
+
+def dirichlet_vertices(shape, boundary="neumann") -> np.ndarray:
+    """The vertices held at psi = 0 by a boundary condition, sorted unique int64 ids (empty for Neumann).
+
+    Parameters
+    ----------
+    shape : TriMesh, (vertices, faces) or PointCloud
+    boundary : "neumann", "dirichlet" or array_like of vertex ids
+        "neumann": none (the natural condition of W, no constraint). "dirichlet": every vertex on a
+        boundary edge of the mesh (none on a closed mesh, where both conditions coincide). An array: those
+        vertices (or points), in any order, repeats allowed.
+
+    Dirichlet conditions are imposed by restriction: the eigenproblem of ``H`` and ``A`` on the other
+    vertices (rows and columns of the fixed ones removed) is the P1 finite-element problem on the
+    functions that vanish at the fixed vertices, and its eigenvectors extend by zero.
+
+    Raises
+    ------
+    HamsaError
+        On an unknown string, "dirichlet" for a point cloud (it has no boundary edges: pass the ids of its
+        boundary points), or ids that are not integers in [0, n).
+    """
+    shape = as_shape(shape)
+    n = shape.n_vertices
+    if isinstance(boundary, str):
+        if boundary not in BOUNDARY_CONDITIONS:
+            raise HamsaError(f"boundary must be {BOUNDARY_CONDITIONS} or an array of vertex ids, got {boundary!r}")
+        if boundary == "neumann":
+            return np.zeros(0, dtype=np.int64)
+        if isinstance(shape, PointCloud):
+            raise HamsaError(
+                "a point cloud has no boundary edges for boundary='dirichlet': pass boundary= the ids of the "
+                "points to hold at zero"
+            )
+        return np.unique(shape.boundary_edges).astype(np.int64)
+    ids = np.asarray(boundary)
+    if ids.ndim != 1 or (ids.size and not np.issubdtype(ids.dtype, np.integer)):
+        raise HamsaError(f"Dirichlet vertices must be a 1-D array of integer ids, got shape {ids.shape} {ids.dtype}")
+    if ids.size and (ids.min() < 0 or ids.max() >= n):
+        raise HamsaError(f"Dirichlet vertex ids must be in [0, {n}), got {int(ids.min())} .. {int(ids.max())}")
+    return np.unique(ids).astype(np.int64)
+
+
+def _require_edge_manifold(mesh: TriMesh, laplacian: str) -> None:
+    if not mesh.is_edge_manifold:
+        raise MeshError(
+            f"the mesh has {len(mesh.non_manifold_edges)} edges shared by more than two faces (first: "
+            f"{mesh.non_manifold_edges[0].tolist()}): the {laplacian} Laplacian is undefined there; use "
+            "laplacian='tufted'"
+        )
+
+
 def hamiltonian(
-    mesh, potential=None, mass: str = "voronoi", laplacian: str = "cotan"
+    shape, potential=None, mass: str = "voronoi", laplacian: str | None = None
 ) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """The discrete Hamiltonian ``H = W + A diag(V)`` and the mass ``A`` (paper eq. fem6).
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
+    shape : TriMesh, (vertices, faces) or PointCloud
     potential : array_like, shape (n,), optional
-        V at each vertex, any sign, in units of 1/length^2 (the units of the eigenvalues).
+        V at each vertex (point), any sign, in units of 1/length^2 (the units of the eigenvalues).
         None means V = 0 (the Laplace-Beltrami operator).
     mass : {"voronoi", "barycentric", "full"}
         Mass kind, see :func:`mass_matrix`; with "full" the potential term is the consistent
         ``integral V phi_i phi_j`` (see :func:`potential_mass_matrix`).
-    laplacian : {"cotan", "intrinsic_delaunay"}
-        "cotan": the paper's W on the mesh as given; "intrinsic_delaunay": W and the lumped mass of the
-        intrinsic Delaunay triangulation (:func:`intrinsic_delaunay_operators`; ``mass`` must then be
-        lumped), robust to needles and obtuse triangles.
+    laplacian : {"cotan", "intrinsic_delaunay", "tufted", "point_cloud"}, optional
+        The discretization of W and A, see :func:`laplacian_operators` (None: "cotan" for a mesh,
+        "point_cloud" for a cloud).
 
     Returns
     -------
@@ -239,21 +348,11 @@ def hamiltonian(
         lumped kinds). Generalized eigenproblem: ``H psi = E A psi``.
     A : scipy.sparse.csr_matrix, shape (n, n)
     """
-    mesh = as_trimesh(mesh)
-    if mass not in MASS_KINDS:
-        raise HamsaError(f"mass kind must be one of {MASS_KINDS}, got {mass!r}")
-    if laplacian not in LAPLACIANS:
-        raise HamsaError(f"laplacian must be one of {LAPLACIANS}, got {laplacian!r}")
-    mesh.require_operator_ready()
-    if laplacian == "intrinsic_delaunay":
-        if mass == "full":
-            raise HamsaError("the intrinsic Delaunay Laplacian comes with a lumped mass: use mass='voronoi'")
-        stiffness, mass_mat = intrinsic_delaunay_operators(mesh)
-    else:
-        stiffness, mass_mat = stiffness_matrix(mesh), mass_matrix(mesh, mass)
+    shape = as_shape(shape)
+    stiffness, mass_mat = laplacian_operators(shape, mass, laplacian)
     if potential is None:
         return stiffness, mass_mat
-    potential = check_potential(potential, mesh.n_vertices)
+    potential = check_potential(potential, shape.n_vertices)
     spectrum_scale = float(np.max(stiffness.diagonal() / mass_mat.diagonal()))  # about the largest eigenvalue
     if np.abs(potential).max() > MAX_POTENTIAL_RATIO * spectrum_scale:
         raise PotentialError(
@@ -262,7 +361,7 @@ def hamiltonian(
             "vanish in round-off; rescale V (an 'infinite wall' works as well at 1e6 times the eigenvalues of interest)"
         )
     if mass == "full":
-        term = potential_mass_matrix(mesh, potential, "full")
+        term = potential_mass_matrix(shape, potential, "full")
     else:
         term = sp.diags(mass_mat.diagonal() * potential)
     return (stiffness + term).tocsr(), mass_mat

@@ -1,8 +1,9 @@
-"""Potentials V on a mesh: functions returning (n,) float64 arrays (units 1/length^2 once scaled).
+"""Potentials V on a mesh (and, where they need no faces, a point cloud): (n,) float64 arrays.
 
-Each function documents its normalization. Scale matters: the effect of V on the eigenbasis depends
-on ``mu * V`` relative to the spectrum (see :func:`hamsa.theory.critical_potential_scale`), so the
-shape-derived potentials here are normalized to a fixed range and the caller picks the scale. The
+Units are 1/length^2 once scaled; each function documents its normalization. Scale matters: the
+effect of V on the eigenbasis depends on ``mu * V`` relative to the spectrum (see
+:func:`hamsa.theory.critical_potential_scale`), so the shape-derived potentials here are normalized to
+a fixed range and the caller picks the scale. The
 landmark potential of ICSKM is the normalized geodesic distance,
 ``hamsa.geodesic.geodesic_distance(mesh, landmarks, normalize=True)``.
 """
@@ -15,6 +16,7 @@ from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError, PotentialError
 from hamsa.mesh import TriMesh, as_trimesh
 from hamsa.operators import stiffness_matrix, vertex_areas
+from hamsa.pointcloud import as_shape
 
 
 def step(mesh, region, height: float, threshold: float | None = None) -> np.ndarray:
@@ -22,7 +24,7 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
+    mesh : TriMesh, (vertices, faces) or PointCloud
     region : (n,) bool array, or (n,) float array with ``threshold``
         The vertices where V = height: a mask, or the vertices whose field value is > threshold.
     height : float
@@ -35,7 +37,7 @@ def step(mesh, region, height: float, threshold: float | None = None) -> np.ndar
     -------
     (n,) float64
     """
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     field = np.asarray(region)
     if field.shape != (mesh.n_vertices,):
         raise PotentialError(f"region has shape {field.shape}, the mesh has {mesh.n_vertices} vertices")
@@ -104,9 +106,10 @@ def area_distortion(mesh_a, mesh_b, correspondence=None) -> np.ndarray:
 def from_vertex_colors(mesh, colors) -> np.ndarray:
     """Texture potential: Rec. 709 luminance ``0.2126 R + 0.7152 G + 0.0722 B`` in [0, 1].
 
-    ``colors`` is (n, 3) or (n, 4) (alpha ignored), floats in [0, 1] or integers in [0, 255].
+    ``colors`` is (n, 3) or (n, 4) (alpha ignored), floats in [0, 1] or integers in [0, 255]; ``mesh`` a
+    mesh or a point cloud (a coloured scan).
     """
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     rgb = np.asarray(colors)
     if rgb.ndim != 2 or rgb.shape[0] != mesh.n_vertices or rgb.shape[1] not in (3, 4):
         raise PotentialError(f"colors must be (n, 3) or (n, 4) with n = {mesh.n_vertices}, got {rgb.shape}")

@@ -123,6 +123,29 @@ def rectangle(width: float = 1.0, height: float = 1.0, nx: int = 40, ny: int = 4
     return TriMesh(vertices, faces[:, ::-1] if _normal_z(vertices, faces[0]) < 0 else faces)
 
 
+def disk(radius: float = 1.0, rings: int = 16) -> TriMesh:
+    """A flat disk of ``radius`` in the z = 0 plane: the center and ``rings`` concentric rings of 6i points.
+
+    The points are Delaunay-triangulated (nearly equilateral triangles, spacing ``radius / rings``); the
+    outer ring lies on the circle. Dirichlet eigenvalues of the unit disk are the squared Bessel zeros
+    ``j_{m,k}^2`` (5.783, 14.682 twice, 26.374 twice, 30.471, ...), Neumann ones the squared zeros of ``J_m'``.
+    """
+    from scipy.spatial import Delaunay
+
+    if rings < 1 or radius <= 0:
+        raise ValueError("need rings >= 1 and radius > 0")
+    points = [np.zeros((1, 2))]
+    for ring in range(1, rings + 1):
+        angle = 2 * np.pi * (np.arange(6 * ring) + 0.5 * (ring % 2)) / (6 * ring)
+        points.append(radius * ring / rings * np.stack([np.cos(angle), np.sin(angle)], axis=1))
+    xy = np.concatenate(points)
+    faces = Delaunay(xy).simplices.astype(np.int64)
+    a, b, c = (xy[faces[:, i]] for i in range(3))
+    clockwise = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) < 0
+    faces[clockwise] = faces[clockwise][:, ::-1]
+    return TriMesh(np.column_stack([xy, np.zeros(len(xy))]), faces)
+
+
 def _normal_z(vertices: np.ndarray, face: np.ndarray) -> float:
     p = vertices[face]
     return float(np.cross(p[1] - p[0], p[2] - p[0])[2])

@@ -1,4 +1,6 @@
-"""Pictures of functions on meshes: off-screen renders (pyvista) and interactive HTML pages (plotly); ``[viz]`` extra.
+"""Pictures of functions on meshes and point clouds: off-screen renders (pyvista), interactive HTML (plotly).
+
+Both need the ``[viz]`` extra.
 
 Rendering uses pyvista (VTK) off screen; without a display it selects VTK's EGL window, which works
 headless with Debian's ``libegl1 libegl-mesa0 libgl1-mesa-dri``. Curves are left to matplotlib.
@@ -11,7 +13,7 @@ import os
 import numpy as np
 
 from hamsa.errors import HamsaError, MissingDependencyError
-from hamsa.mesh import as_trimesh
+from hamsa.pointcloud import PointCloud, as_shape
 
 VIEWS = ("auto", "xy", "xz", "yz", "yx", "zx", "zy", "iso")
 
@@ -28,9 +30,11 @@ def _pyvista():
 
 
 def to_polydata(mesh):
-    """A ``pyvista.PolyData`` with the mesh's vertices and triangles (vertex order kept)."""
+    """A ``pyvista.PolyData`` with the mesh's vertices and triangles, or a cloud's points (order kept)."""
     pv = _pyvista()
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
+    if isinstance(mesh, PointCloud):
+        return pv.PolyData(mesh.vertices.copy())
     cells = np.hstack([np.full((mesh.n_faces, 1), 3), mesh.faces]).ravel()
     return pv.PolyData(mesh.vertices.copy(), cells)
 
@@ -53,7 +57,8 @@ def render_fields(
 
     Parameters
     ----------
-    mesh : TriMesh, (vertices, faces), or a sequence of them (one per field, e.g. noisy copies)
+    mesh : TriMesh, (vertices, faces), PointCloud (drawn as points), or a sequence of them (one per field,
+        e.g. noisy copies)
     fields : sequence of (n,) arrays
     path : str or Path of the PNG
     titles : sequence of str, optional (one per field)
@@ -100,8 +105,8 @@ def render_fields(
             clim=_color_range(
                 field, symmetric, overall if shared_range else None, everything if shared_range else None
             ),
-            smooth_shading=True,
             scalar_bar_args=dict(_SCALAR_BAR, title=" " * index),
+            **({"point_size": 9} if poly.n_cells == poly.n_verts else {"smooth_shading": True}),  # a cloud: dots
         )
         plotter.add_text(title, position="upper_edge", font_size=9, color="black")
         plotter.set_background("white")
@@ -199,7 +204,7 @@ def to_html(
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
+    mesh : TriMesh, (vertices, faces) or PointCloud (drawn as coloured points)
     fields : (n,) array, a sequence of them, or a dict {name: (n,) array}; one button per field
     path : str or Path of the .html file (written atomically)
     titles : names of the fields (when ``fields`` is not a dict)
@@ -213,7 +218,7 @@ def to_html(
         raise MissingDependencyError("interactive views need plotly: pip install 'hamsa[viz]'") from None
     from hamsa.files import atomic_write
 
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     if isinstance(fields, dict):
         titles, fields = list(fields), list(fields.values())
     elif np.ndim(fields) == 1:
@@ -234,20 +239,27 @@ def to_html(
         return (low, high) if high > low else (low - 1.0, high + 1.0)
 
     x, y, z = mesh.vertices.T
-    i, j, k = mesh.faces.T
     low, high = color_range(fields[0])
-    figure = go.Figure(
-        go.Mesh3d(
+    colorbar = {"title": {"text": titles[0]}}
+    if isinstance(mesh, PointCloud):
+        trace = go.Scatter3d(
+            x=x, y=y, z=z, mode="markers",
+            marker={"size": 2, "color": fields[0], "colorscale": cmap, "cmin": low, "cmax": high, "colorbar": colorbar},
+        )  # fmt: skip
+        prefix, values = "marker.", "marker.color"
+    else:
+        i, j, k = mesh.faces.T
+        trace = go.Mesh3d(
             x=x, y=y, z=z, i=i, j=j, k=k,
             intensity=fields[0], intensitymode="vertex", colorscale=cmap, cmin=low, cmax=high,
-            colorbar={"title": {"text": titles[0]}}, flatshading=False,
-            lighting={"ambient": 0.5, "diffuse": 0.7, "specular": 0.1},
-        )
-    )  # fmt: skip
+            colorbar=colorbar, flatshading=False, lighting={"ambient": 0.5, "diffuse": 0.7, "specular": 0.1},
+        )  # fmt: skip
+        prefix, values = "", "intensity"
+    figure = go.Figure(trace)
     buttons = []
     for name, field in zip(titles, fields):
         low, high = color_range(field)
-        restyle = {"intensity": [field], "cmin": low, "cmax": high, "colorbar.title.text": name}
+        restyle = {values: [field], f"{prefix}cmin": low, f"{prefix}cmax": high, f"{prefix}colorbar.title.text": name}
         buttons.append({"label": name, "method": "restyle", "args": [restyle]})
     figure.update_layout(
         title=title,

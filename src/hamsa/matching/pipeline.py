@@ -33,7 +33,8 @@ def match(source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landm
     source, target : the two shapes' eigenbases (the LBO's or Hamiltonians'), with the same k for the
         spectral methods; use shapes scaled alike (e.g. :meth:`hamsa.TriMesh.scaled_to_unit_area`)
     landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``
-    meshes : (source mesh, target mesh), for ``sgfe`` and ``icskm_geo``
+    meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``. Every other
+        method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
 
     Raises
     ------
@@ -97,14 +98,14 @@ def _icskm(source, target, landmarks, meshes, features=None):
 
 
 def _icskm_geo(source, target, landmarks, meshes):
-    from hamsa.geodesic import GeodesicSolver
+    from hamsa.geodesic import geodesic_solver
 
     if landmarks is None:
         raise HamsaError("icskm_geo needs landmark pairs (source ids, target ids)")
     if meshes is None:
-        raise HamsaError("icskm_geo needs the two meshes (for the geodesic distances from the landmarks)")
+        raise HamsaError("icskm_geo needs the two shapes (for the geodesic distances from the landmarks)")
     features = tuple(
-        GeodesicSolver(mesh).distances_from(ids, unreachable="farthest") for mesh, ids in zip(meshes, landmarks)
+        geodesic_solver(shape).distances_from(ids, unreachable="farthest") for shape, ids in zip(meshes, landmarks)
     )
     return _icskm(source, target, landmarks, meshes, features)
 

@@ -1,0 +1,175 @@
+"""Point clouds: the validated :class:`PointCloud` value object and its Laplacian (Sharp & Crane 2020).
+
+A point cloud is an (n, 3) array of points sampling a surface, with no faces. Its operators are the
+point-cloud Laplacian of Sharp & Crane, "A Laplacian for Nonmanifold Triangle Meshes" (SGP 2020), sec. 5
+(robust_laplacian's ``point_cloud_laplacian``): each point's ``neighbors`` nearest points are projected
+on its tangent plane and Delaunay-triangulated there; the union of these local triangulations is a
+non-manifold triangle set whose tufted intrinsic Delaunay cotan Laplacian (each triangle weighted 1/3) is
+``W`` and whose lumped mass is ``A``. ``W`` is symmetric positive semidefinite with ``W @ 1 = 0`` (hamsa's
+sign convention) and ``A.sum()`` estimates the sampled surface's area, so everything in hamsa that needs
+only (W, A) -- eigenbases of ``W + A diag(V)``, heat kernels, HKS / WKS, functional maps, ICSKM -- runs on a
+cloud unchanged. Geodesic distances on a cloud come from potpourri3d's point-cloud heat method
+(:class:`hamsa.geodesic.PointCloudGeodesicSolver`). Needs the ``[pointcloud]`` extra.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from hamsa.errors import MeshError, MissingDependencyError
+from hamsa.mesh import _LARGEST_COORDINATE, TriMesh, _first, as_trimesh
+
+DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
+
+
+class PointCloud:
+    """A validated point cloud with the point-cloud Laplacian and mass.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 3)
+        The sample points; converted to float64, order kept (point i is "vertex" i everywhere in hamsa).
+    neighbors : int
+        Nearest neighbours of each point in its local tangent-plane triangulation; n must exceed it.
+    mollify : float
+        Intrinsic mollification of near-degenerate local triangles, as a fraction of the mean edge length.
+
+    Raises
+    ------
+    MeshError
+        If the array is not real (n, 3), has non-finite or huge coordinates, has no more than
+        ``neighbors`` points, or repeats a point (two samples at one place have no tangent-plane
+        triangulation between them; remove duplicates first).
+
+    Examples
+    --------
+    >>> import hamsa
+    >>> cloud = hamsa.PointCloud(hamsa.shapes.icosphere(3).vertices)
+    >>> basis = hamsa.eigenbasis(cloud, k=4)
+    >>> basis.values[1:].round(1).tolist()  # close to the unit sphere's l(l+1) = 2
+    [2.0, 2.0, 2.0]
+    """
+
+    def __init__(self, points, *, neighbors: int = DEFAULT_NEIGHBORS, mollify: float = 1e-5):
+        points = _as_points(points)
+        if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
+            raise MeshError(f"neighbors must be an integer >= 3, got {neighbors!r}")
+        if len(points) <= neighbors:
+            raise MeshError(
+                f"a point cloud needs more than neighbors = {neighbors} points for its local triangulations, "
+                f"got {len(points)}"
+            )
+        tree = cKDTree(points)
+        distance, nearest = tree.query(points, k=2)
+        repeated = np.flatnonzero(distance[:, 1] == 0)
+        if len(repeated):
+            i = int(repeated[0])
+            raise MeshError(
+                f"{len(repeated)} points repeat another point exactly ({_first(repeated)}; point {i} equals point "
+                f"{int(nearest[i, 1]) if nearest[i, 1] != i else int(nearest[i, 0])}): remove the duplicates"
+            )
+        points.flags.writeable = False
+        self._points = points
+        self._spacing = distance[:, 1]
+        self.neighbors = int(neighbors)
+        self.mollify = float(mollify)
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float64 point coordinates (read-only); named as a mesh's so vertex-wise code serves both."""
+        return self._points
+
+    @property
+    def points(self) -> np.ndarray:
+        """The same array as :attr:`vertices`."""
+        return self._points
+
+    @property
+    def n_vertices(self) -> int:
+        return self._points.shape[0]
+
+    def __repr__(self) -> str:
+        return f"PointCloud(n_points={self.n_vertices}, neighbors={self.neighbors})"
+
+    @cached_property
+    def operators(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """``(W, A)``: the point-cloud stiffness (PSD, ``W @ 1 = 0``) and lumped mass, both (n, n) csr."""
+        try:
+            import robust_laplacian
+        except ImportError:
+            raise MissingDependencyError(
+                "the point-cloud Laplacian needs robust_laplacian: pip install 'hamsa[pointcloud]'"
+            ) from None
+        W, A = robust_laplacian.point_cloud_laplacian(
+            self._points, mollify_factor=self.mollify, n_neighbors=self.neighbors
+        )
+        return sp.csr_matrix(W), sp.csr_matrix(A)
+
+    @cached_property
+    def area(self) -> float:
+        """The sampled surface's area as the Laplacian's mass estimates it (sum of the lumped mass)."""
+        return float(self.operators[1].diagonal().sum())
+
+    @cached_property
+    def mean_spacing(self) -> float:
+        """Mean distance from a point to its nearest other point (the cloud's "edge length")."""
+        return float(self._spacing.mean())
+
+    @cached_property
+    def bounding_box_diagonal(self) -> float:
+        return float(np.linalg.norm(self._points.max(axis=0) - self._points.min(axis=0)))
+
+    @cached_property
+    def vertex_components(self) -> tuple[int, np.ndarray]:
+        """(count, labels (n,)): pieces of the cloud that the Laplacian's neighbourhoods do not join."""
+        count, labels = connected_components(self.operators[0], directed=False)
+        return int(count), labels.astype(np.int64)
+
+    @property
+    def n_components(self) -> int:
+        return self.vertex_components[0]
+
+    def scaled_to_unit_area(self) -> PointCloud:
+        """This cloud centered at its mean and scaled so that :attr:`area` is 1 (same neighbourhoods)."""
+        centered = (self._points - self._points.mean(axis=0)) / np.sqrt(self.area)
+        return PointCloud(centered, neighbors=self.neighbors, mollify=self.mollify)
+
+    def subset(self, indices) -> PointCloud:
+        """The cloud of the points ``indices`` (in that order): e.g. a random subsample."""
+        indices = np.asarray(indices)
+        if indices.ndim != 1 or not np.issubdtype(indices.dtype, np.integer):
+            raise MeshError(f"indices must be a 1-D integer array, got shape {indices.shape} {indices.dtype}")
+        if indices.size and (indices.min() < 0 or indices.max() >= self.n_vertices):
+            raise MeshError(f"indices must be in [0, {self.n_vertices})")
+        return PointCloud(self._points[indices], neighbors=self.neighbors, mollify=self.mollify)
+
+
+def as_shape(shape_like) -> TriMesh | PointCloud:
+    """A :class:`PointCloud` as it is, anything else through :func:`hamsa.mesh.as_trimesh`."""
+    if isinstance(shape_like, PointCloud):
+        return shape_like
+    return as_trimesh(shape_like)
+
+
+def _as_points(points) -> np.ndarray:
+    try:
+        p = np.asarray(points)
+        complex_values = np.iscomplexobj(p)
+        p = None if complex_values else np.array(p, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(f"points are not a numeric (n, 3) array: {exc}") from None
+    if complex_values:
+        raise MeshError("points must be real numbers, got complex ones")
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise MeshError(f"points must have shape (n, 3), got {p.shape}")
+    bad = np.flatnonzero(~np.isfinite(p).all(axis=1))
+    if len(bad):
+        raise MeshError(f"{len(bad)} points have non-finite coordinates (NaN or Inf): {_first(bad)}")
+    if len(p) and np.abs(p).max() > _LARGEST_COORDINATE:
+        raise MeshError(f"coordinates as large as {np.abs(p).max():.3g} overflow the geometry; rescale the cloud")
+    return p

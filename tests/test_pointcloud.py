@@ -1,0 +1,171 @@
+"""Point clouds: the Sharp-Crane Laplacian against analytic spectra and the mesh operators, geodesics, I/O, errors."""
+
+import numpy as np
+import pytest
+
+import hamsa
+from hamsa.errors import HamsaError, MeshError
+
+pytest.importorskip("robust_laplacian", reason="point clouds need the [pointcloud] extra")
+
+SPHERE = np.array([d * (d + 1) for d in range(4) for _ in range(2 * d + 1)], dtype=float)  # l(l+1), 2l+1 times
+
+
+def test_sphere_cloud_eigenvalues_approach_l_times_l_plus_one_as_the_sampling_densifies():
+    errors = []
+    for n in (500, 2000, 8000):
+        cloud = hamsa.PointCloud(hamsa.shapes.sphere(n).vertices)  # Fibonacci samples, no faces
+        basis = hamsa.eigenbasis(cloud, len(SPHERE))
+        errors.append(np.max(np.abs(basis.values - SPHERE)[1:] / SPHERE[1:]))
+        assert abs(cloud.area / (4 * np.pi) - 1) < 0.01
+    assert np.all(np.diff(errors) < 0) and errors[-1] < 0.002, errors
+
+
+@pytest.fixture(scope="module")
+def humanoid_pair():
+    mesh = hamsa.shapes.humanoid().scaled_to_unit_area()
+    cloud = hamsa.PointCloud(mesh.vertices)
+    return mesh, cloud, hamsa.eigenbasis(mesh, 30), hamsa.eigenbasis(cloud, 30)
+
+
+def test_cloud_spectrum_and_hks_follow_the_mesh_at_the_same_points(humanoid_pair):
+    mesh, cloud, on_mesh, on_cloud = humanoid_pair
+    np.testing.assert_allclose(on_cloud.values[1:], on_mesh.values[1:], rtol=0.05)
+    assert abs(cloud.area - mesh.area) < 0.02 * mesh.area
+    times = hamsa.diffusion.default_hks_times(on_mesh, 8)
+    hks_mesh = hamsa.diffusion.heat_kernel_signature(on_mesh, times)
+    hks_cloud = hamsa.diffusion.heat_kernel_signature(on_cloud, times)
+    correlation = [np.corrcoef(hks_mesh[:, j], hks_cloud[:, j])[0, 1] for j in range(len(times))]
+    assert min(correlation) > 0.99, correlation
+
+
+def test_hamiltonian_with_a_landmark_potential_on_the_cloud_follows_the_mesh(humanoid_pair):
+    pytest.importorskip("potpourri3d")
+    mesh, cloud, _, _ = humanoid_pair
+    foot = int(np.argmin(mesh.vertices[:, 2]))
+    V_mesh = 100 * hamsa.geodesic.geodesic_distance(mesh, [foot], normalize=True)
+    V_cloud = 100 * hamsa.geodesic.geodesic_distance(cloud, [foot], normalize=True)
+    assert np.abs(V_cloud - V_mesh).max() < 3.0  # 3% of the range: both heat methods are first order
+    values_mesh = hamsa.eigenbasis(mesh, 10, V_mesh).values
+    values_cloud = hamsa.eigenbasis(cloud, 10, V_cloud).values
+    np.testing.assert_allclose(values_cloud, values_mesh, rtol=0.05)
+
+
+def test_cloud_geodesics_match_great_circles_and_pieces_are_unreachable():
+    pytest.importorskip("potpourri3d")
+    points = hamsa.shapes.sphere(3000).vertices
+    solver = hamsa.geodesic.geodesic_solver(hamsa.PointCloud(points))
+    table = solver.distances_from([0, 1500])
+    exact = np.arccos(np.clip(points @ points[[0, 1500]].T, -1, 1))
+    assert np.abs(table - exact).max() < 0.05 * np.pi
+    two = hamsa.PointCloud(np.vstack([points, points + [5.0, 0, 0]]))
+    assert two.n_components == 2
+    distance = hamsa.geodesic.geodesic_distance(two, [0])
+    assert np.all(np.isinf(distance[3000:])) and np.isfinite(distance[:3000]).all()
+
+
+def test_kim_errors_on_a_cloud_use_its_own_geodesics():
+    pytest.importorskip("potpourri3d")
+    cloud = hamsa.PointCloud(hamsa.shapes.sphere(2000).vertices)
+    truth = np.arange(0, 2000, 7)
+    errors = hamsa.evaluation.geodesic_errors(cloud, truth, truth)
+    assert np.all(errors == 0)
+    shifted = hamsa.evaluation.geodesic_errors(cloud, (truth + 1000) % 2000, truth)
+    exact = np.arccos(np.clip(np.sum(cloud.vertices[(truth + 1000) % 2000] * cloud.vertices[truth], 1), -1, 1))
+    np.testing.assert_allclose(shifted, exact / np.sqrt(cloud.area), atol=0.02)
+
+
+def test_functional_map_matching_runs_on_cloud_bases(humanoid_pair):
+    mesh, cloud, on_mesh, on_cloud = humanoid_pair
+    posed = hamsa.shapes.humanoid("walk").scaled_to_unit_area()
+    target = hamsa.eigenbasis(hamsa.PointCloud(posed.vertices), 30)
+    mapping = hamsa.matching.match(on_cloud, target, "fmap")
+    points = hamsa.evaluation.sample_points(posed.n_vertices, 300)
+    errors = hamsa.evaluation.geodesic_errors(hamsa.PointCloud(posed.vertices), mapping[points], points)
+    assert hamsa.evaluation.summary(errors)["auc"] > 0.5  # the built-in poses share vertex ids
+
+
+@pytest.mark.parametrize("suffix", [".xyz", ".xyz.gz", ".npy", ".ply", ".off"])
+def test_point_files_load_in_order(tmp_path, suffix):
+    import gzip
+
+    points = hamsa.shapes.sphere(200).vertices
+    path = tmp_path / f"cloud{suffix}"
+    if suffix == ".npy":
+        np.save(path, np.hstack([points, np.ones((200, 3))]))  # extra columns (normals) are ignored
+    elif suffix.startswith(".xyz"):
+        text = "# x y z nx ny nz\n" + "\n".join(f"{x:.17g}, {y:.17g}, {z:.17g}, 0, 0, 1" for x, y, z in points)
+        path.write_bytes(gzip.compress(text.encode()) if suffix.endswith(".gz") else text.encode())
+    elif suffix == ".ply":
+        properties = "".join(f"property float {c}\n" for c in "xyz")
+        header = f"ply\nformat ascii 1.0\nelement vertex 200\n{properties}end_header\n"
+        path.write_text(header + "\n".join(f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in points))
+    else:
+        path.write_text("OFF\n200 0 0\n" + "\n".join(f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in points))
+    assert hamsa.io.is_point_file(path)
+    cloud = hamsa.load_point_cloud(path)
+    np.testing.assert_allclose(cloud.vertices, points, atol=1e-6)
+    if suffix in (".ply", ".off"):
+        with pytest.raises(MeshError, match="no faces: read a point cloud"):
+            hamsa.load_mesh(path)
+
+
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        (np.zeros((40, 2)), r"shape \(n, 3\)"),
+        (np.full((40, 3), np.nan), "non-finite"),
+        (np.random.default_rng(0).random((20, 3)), "more than neighbors = 30 points"),
+        (np.vstack([np.random.default_rng(0).random((40, 3))] * 2), "repeat another point"),
+        (np.random.default_rng(0).random((40, 3)) + 1j, "complex"),
+    ],
+)
+def test_bad_clouds_are_refused_with_the_problem_named(points, message):
+    with pytest.raises(MeshError, match=message):
+        hamsa.PointCloud(points)
+
+
+def test_mismatched_choices_are_refused():
+    cloud = hamsa.PointCloud(hamsa.shapes.sphere(100).vertices)
+    with pytest.raises(HamsaError, match="no faces for the cotan"):
+        hamsa.eigenbasis(cloud, 3, laplacian="cotan")
+    with pytest.raises(HamsaError, match="lumped mass"):
+        hamsa.eigenbasis(cloud, 3, mass="full")
+    with pytest.raises(HamsaError, match="pass boundary= the ids"):
+        hamsa.eigenbasis(cloud, 3, boundary="dirichlet")
+    with pytest.raises(HamsaError, match="is for a PointCloud"):
+        hamsa.eigenbasis(hamsa.shapes.icosphere(2), 3, laplacian="point_cloud")
+    with pytest.raises(hamsa.PotentialError, match="100 vertices"):
+        hamsa.eigenbasis(cloud, 3, np.zeros(99))
+
+
+def test_command_line_takes_point_files_non_manifold_meshes_and_dirichlet_vertices(tmp_path, capsys):
+    pytest.importorskip("potpourri3d")
+    from test_robust_laplacian import open_book
+
+    from hamsa.cli import main
+
+    sphere = hamsa.shapes.sphere(800)
+    np.savetxt(tmp_path / "cloud.xyz", sphere.vertices)
+    assert main(["info", str(tmp_path / "cloud.xyz")]) == 0
+    assert "points          800" in capsys.readouterr().out
+    assert main(["basis", str(tmp_path / "cloud.xyz"), "-k", "4", "-q", "-o", str(tmp_path / "c.npz")]) == 0
+    basis = hamsa.Eigenbasis.load(tmp_path / "c.npz")
+    assert basis.mass_kind == "point_cloud"
+    np.testing.assert_allclose(basis.values, hamsa.eigenbasis(hamsa.PointCloud(sphere.vertices), 4).values)
+
+    hamsa.save_mesh(open_book(n=4), tmp_path / "book.off")
+    assert main(["basis", str(tmp_path / "book.off"), "-k", "3", "-q", "-o", str(tmp_path / "b.npz")]) == 2
+    assert "--laplacian tufted" in capsys.readouterr().err
+    np.savetxt(tmp_path / "spine.txt", np.arange(5), fmt="%d")  # psi = 0 along the spine
+    args = ["basis", str(tmp_path / "book.off"), "-k", "3", "--laplacian", "tufted", "--boundary"]
+    assert main([*args, str(tmp_path / "spine.txt"), "-q", "-o", str(tmp_path / "b.npz")]) == 0
+    held = hamsa.Eigenbasis.load(tmp_path / "b.npz")
+    assert np.all(held.vectors[:5] == 0)
+    # three pages, each a square clamped on one side: pi^2 / 4 three times
+    np.testing.assert_allclose(held.values, np.pi**2 / 4, rtol=0.03)
+
+    np.savetxt(tmp_path / "posed.xyz", sphere.vertices @ np.diag([1.0, 1.0, 1.2]))
+    out = tmp_path / "map.npy"
+    assert main(["match", str(tmp_path / "cloud.xyz"), str(tmp_path / "posed.xyz"), "-q", "-o", str(out)]) == 0
+    assert np.load(out).shape == (800,)
