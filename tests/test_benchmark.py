@@ -91,7 +91,7 @@ def test_texture_and_landmark_feature_methods_on_a_pose_pair(pose_dataset):
     assert by[("texture", "hamiltonian")]["auc"] > by[("texture", "lbo")]["auc"] + 0.05  # the coat tells parts apart
     for basis in ("lbo", "hamiltonian"):
         assert by[("icskm_geo", basis)]["within_0.05"] > 0.9
-    with pytest.raises(HamsaError, match="icskm_geo needs the two meshes"):
+    with pytest.raises(HamsaError, match="icskm_geo needs the two shapes"):
         match_pair("icskm_geo", None, None, landmarks=([0], [0]))
 
 

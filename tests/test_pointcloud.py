@@ -169,3 +169,13 @@ def test_command_line_takes_point_files_non_manifold_meshes_and_dirichlet_vertic
     out = tmp_path / "map.npy"
     assert main(["match", str(tmp_path / "cloud.xyz"), str(tmp_path / "posed.xyz"), "-q", "-o", str(out)]) == 0
     assert np.load(out).shape == (800,)
+
+
+def test_heat_on_a_cloud_from_its_eigenbasis_equals_time_stepping():
+    cloud = hamsa.PointCloud(hamsa.shapes.sphere(600).vertices)
+    u0 = np.zeros(cloud.n_vertices)
+    u0[0] = 1.0 / cloud.operators[1].diagonal()[0]  # a unit of heat at point 0
+    basis = hamsa.eigenbasis(cloud, 600, method="dense")
+    spectral = hamsa.diffusion.diffuse(basis, u0, 0.05)
+    stepped = hamsa.diffusion.diffuse_time_stepping(cloud, u0, 0.05, steps=400)
+    assert np.abs(spectral - stepped).max() < 2e-3 * np.abs(spectral).max()

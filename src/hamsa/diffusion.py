@@ -16,8 +16,8 @@ import scipy.sparse as sp
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.factorization import CholeskySolver
-from hamsa.mesh import as_trimesh
 from hamsa.operators import check_potential, hamiltonian
+from hamsa.pointcloud import as_shape
 
 LN10 = np.log(10.0)
 
@@ -81,9 +81,9 @@ def diffuse_time_stepping(mesh, u0, t: float, potential=None, steps: int = 200, 
     implicit-Euler half steps (Rannacher start-up) so that rough data such as a delta do not leave
     undamped high-frequency oscillations. Used to cross-check :func:`diffuse`.
 
-    Returns (n,) or (n, d) at time t.
+    ``mesh`` may be a point cloud (its Laplacian, see :mod:`hamsa.pointcloud`). Returns (n,) or (n, d) at t.
     """
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     if potential is not None:
         potential = check_potential(potential, mesh.n_vertices)
     (t,) = _times(t)
