@@ -67,7 +67,7 @@ class TriMesh:
     """
 
     def __init__(self, vertices, faces, *, manifold: bool = True):
-        vertices = _as_vertices(vertices)
+        vertices = as_coordinates(vertices)
         faces = _as_faces(faces)
         _validate(vertices, faces, manifold)
         vertices.flags.writeable = False
@@ -293,17 +293,18 @@ def as_trimesh(mesh_like) -> TriMesh:
 
 
 # ----------------------------------------------------------------------------------- helpers
-def _as_vertices(vertices) -> np.ndarray:
+def as_coordinates(vertices, what: str = "vertices") -> np.ndarray:
+    """A new float64 (n, 3) array of real coordinates, or a MeshError naming ``what`` is wrong with it."""
     try:
         v = np.asarray(vertices)
         complex_values = np.iscomplexobj(v)
         v = None if complex_values else np.array(v, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise MeshError(f"vertices are not a numeric (n, 3) array: {exc}") from None
+        raise MeshError(f"{what} are not a numeric (n, 3) array: {exc}") from None
     if complex_values:
-        raise MeshError("vertices must be real numbers, got complex ones")
+        raise MeshError(f"{what} must be real numbers, got complex ones")
     if v.ndim != 2 or v.shape[1] != 3:
-        raise MeshError(f"vertices must have shape (n, 3), got {v.shape}")
+        raise MeshError(f"{what} must have shape (n, 3), got {v.shape}")
     return v
 
 
@@ -359,19 +360,24 @@ def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return edges, counts
 
 
+def check_coordinates(points: np.ndarray, what: str = "vertices") -> None:
+    """Raise MeshError if any of the (n, 3) ``points`` is NaN / Inf or too large for the geometry in float64."""
+    bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    if len(bad):
+        raise MeshError(f"{len(bad)} {what} have non-finite coordinates (NaN or Inf): {_first(bad)}")
+    big = np.abs(points).max() if len(points) else 0.0
+    if big > _LARGEST_COORDINATE:
+        raise MeshError(
+            f"coordinates as large as {big:.3g} overflow the geometry in float64 (the limit is "
+            f"{_LARGEST_COORDINATE:.0e}); rescale the {what}"
+        )
+
+
 def _validate(vertices: np.ndarray, faces: np.ndarray, manifold: bool) -> None:
     n, m = len(vertices), len(faces)
     if n == 0 or m == 0:
         raise MeshError(f"mesh is empty ({n} vertices, {m} faces)")
-    bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
-    if len(bad):
-        raise MeshError(f"{len(bad)} vertices have non-finite coordinates (NaN or Inf): {_first(bad)}")
-    big = np.abs(vertices).max()
-    if big > _LARGEST_COORDINATE:
-        raise MeshError(
-            f"coordinates as large as {big:.3g} overflow the geometry in float64 (the limit is "
-            f"{_LARGEST_COORDINATE:.0e}); rescale the mesh"
-        )
+    check_coordinates(vertices, "vertices")
     low, high = faces.min(axis=1), faces.max(axis=1)
     bad = np.flatnonzero(low < 0)
     if len(bad):

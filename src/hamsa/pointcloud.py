@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from hamsa.errors import MeshError, MissingDependencyError
-from hamsa.mesh import _LARGEST_COORDINATE, TriMesh, _first, as_trimesh
+from hamsa.mesh import TriMesh, _first, as_coordinates, as_trimesh, check_coordinates
 
 DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
 
@@ -56,7 +56,8 @@ class PointCloud:
     """
 
     def __init__(self, points, *, neighbors: int = DEFAULT_NEIGHBORS, mollify: float = 1e-5):
-        points = _as_points(points)
+        points = as_coordinates(points, "points")
+        check_coordinates(points, "points")
         if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
             raise MeshError(f"neighbors must be an integer >= 3, got {neighbors!r}")
         if len(points) <= neighbors:
@@ -154,22 +155,3 @@ def as_shape(shape_like) -> TriMesh | PointCloud:
     if isinstance(shape_like, PointCloud):
         return shape_like
     return as_trimesh(shape_like)
-
-
-def _as_points(points) -> np.ndarray:
-    try:
-        p = np.asarray(points)
-        complex_values = np.iscomplexobj(p)
-        p = None if complex_values else np.array(p, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise MeshError(f"points are not a numeric (n, 3) array: {exc}") from None
-    if complex_values:
-        raise MeshError("points must be real numbers, got complex ones")
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise MeshError(f"points must have shape (n, 3), got {p.shape}")
-    bad = np.flatnonzero(~np.isfinite(p).all(axis=1))
-    if len(bad):
-        raise MeshError(f"{len(bad)} points have non-finite coordinates (NaN or Inf): {_first(bad)}")
-    if len(p) and np.abs(p).max() > _LARGEST_COORDINATE:
-        raise MeshError(f"coordinates as large as {np.abs(p).max():.3g} overflow the geometry; rescale the cloud")
-    return p
