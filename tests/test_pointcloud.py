@@ -112,7 +112,7 @@ def test_point_files_load_in_order(tmp_path, suffix):
         path.write_text(header + "\n".join(f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in points))
     else:
         path.write_text("OFF\n200 0 0\n" + "\n".join(f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in points))
-    assert hamsa.io.is_point_file(path)
+    assert isinstance(hamsa.io.load_shape(path), hamsa.PointCloud)
     cloud = hamsa.load_point_cloud(path)
     np.testing.assert_allclose(cloud.vertices, points, atol=1e-6)
     if suffix in (".ply", ".off"):

@@ -55,14 +55,12 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -
     """The mesh (or point cloud) of ``path`` fit for spectral work, or a MeshError naming the defect and the
     fix. A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud; ``laplacian="tufted"``
     takes meshes with non-manifold edges, vertices and mixed orientation as they are."""
-    from hamsa.io import is_point_file, load_mesh, load_point_cloud
+    from hamsa.io import load_shape, point_format
+    from hamsa.pointcloud import PointCloud
 
-    if is_point_file(path):
-        if repair:
-            raise HamsaError(f"'{path}' is a point cloud: --repair is for meshes")
-        cloud = load_point_cloud(path)
-        return _Loaded(cloud, None, cloud.n_vertices)
     if repair:
+        if (point_format(path) or ("",))[0] in ("xyz", "pts", "txt", "npy"):
+            raise HamsaError(f"'{path}' is a point cloud: --repair is for meshes")
         from hamsa.io import read_mesh_arrays
         from hamsa.repair import repair_mesh
 
@@ -73,7 +71,9 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -
         print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
         return _Loaded(mesh, kept, len(vertices))
     tufted = laplacian == "tufted"
-    mesh = load_mesh(path, manifold=not tufted)
+    mesh = load_shape(path, manifold=not tufted)
+    if isinstance(mesh, PointCloud):
+        return _Loaded(mesh, None, mesh.n_vertices)
     hint = "(--repair fixes it)"
     if len(mesh.unreferenced_vertices):
         raise MeshError(f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices {hint}")
@@ -350,10 +350,12 @@ def _output_path(args, suffix: str | None = None, *inputs) -> Path:
 
 
 def _info(args) -> None:
-    from hamsa.io import is_point_file, load_mesh, load_point_cloud
+    from hamsa.io import load_shape
+    from hamsa.pointcloud import PointCloud
 
-    if is_point_file(args.mesh):
-        cloud = load_point_cloud(args.mesh)
+    mesh = load_shape(args.mesh, manifold=False)
+    if isinstance(mesh, PointCloud):
+        cloud = mesh
         print(f"point cloud     {args.mesh}")
         print(f"points          {cloud.n_vertices}")
         print(f"area            {cloud.area:.6g} (the point-cloud Laplacian's mass, {cloud.neighbors} neighbours)")
@@ -361,7 +363,6 @@ def _info(args) -> None:
         print(f"mean spacing    {cloud.mean_spacing:.6g}")
         print(f"components      {cloud.n_components}")
         return
-    mesh = load_mesh(args.mesh, manifold=False)
     loops = mesh.boundary_loops
     print(f"mesh            {args.mesh}")
     print(f"vertices        {mesh.n_vertices}")
@@ -604,12 +605,12 @@ def _in_input_ids(mapping: np.ndarray, source: _Loaded, target: _Loaded) -> np.n
 
 def _load_shape(path: str, repair: bool) -> _Loaded:
     """A point cloud, a repaired mesh, or the mesh as it is (several pieces allowed) for ``hamsa match``."""
-    from hamsa.io import is_point_file, load_mesh
+    from hamsa.io import load_shape
 
-    if repair or is_point_file(path):
+    if repair:
         return _load_for_operators(path, repair)
-    mesh = load_mesh(path)
-    return _Loaded(mesh, None, mesh.n_vertices)
+    shape = load_shape(path)
+    return _Loaded(shape, None, shape.n_vertices)
 
 
 def _to_repaired(vertex: int, loaded: _Loaded) -> int:

@@ -38,13 +38,25 @@ def point_format(path: str | os.PathLike) -> tuple[str, bool] | None:
     return fmt, gzipped
 
 
-def is_point_file(path: str | os.PathLike) -> bool:
-    """True for a file that holds points without faces: ``.xyz`` / ``.pts`` / ``.txt`` / ``.npy`` by name, or
-    an OFF / OBJ / PLY whose face count is zero. Raises MeshError for a mesh-like file that cannot be read."""
+def load_shape(
+    path: str | os.PathLike, *, manifold: bool = True, neighbors: int = DEFAULT_NEIGHBORS
+) -> TriMesh | PointCloud:
+    """The file as a :class:`TriMesh`, or as a :class:`~hamsa.pointcloud.PointCloud` when it holds points without
+    faces (``.xyz`` / ``.pts`` / ``.txt`` / ``.npy``, or an OFF / OBJ / PLY whose face count is zero), read once.
+
+    ``manifold`` as in :func:`load_mesh`, ``neighbors`` as in :class:`~hamsa.pointcloud.PointCloud`. Raises
+    MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
+    """
     fmt = point_format(path)
-    if fmt is None or fmt[0] in ("xyz", "pts", "txt", "npy"):
-        return fmt is not None
-    return len(read_mesh_arrays(path)[1]) == 0
+    if fmt is not None and fmt[0] in ("xyz", "pts", "txt", "npy"):
+        return load_point_cloud(path, neighbors)
+    try:
+        vertices, faces = read_mesh_arrays(path)
+        if len(faces) == 0:
+            return PointCloud(vertices, neighbors=neighbors)
+        return TriMesh(vertices, faces, manifold=manifold)
+    except MeshError as exc:
+        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
 
 
 def load_point_cloud(path: str | os.PathLike, neighbors: int = DEFAULT_NEIGHBORS) -> PointCloud:
