@@ -55,11 +55,11 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -
     """The mesh (or point cloud) of ``path`` fit for spectral work, or a MeshError naming the defect and the
     fix. A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud; ``laplacian="tufted"``
     takes meshes with non-manifold edges, vertices and mixed orientation as they are."""
-    from hamsa.io import load_shape, point_format
+    from hamsa.io import POINTS_ONLY, load_shape, point_format
     from hamsa.pointcloud import PointCloud
 
     if repair:
-        if (point_format(path) or ("",))[0] in ("xyz", "pts", "txt", "npy"):
+        if (point_format(path) or ("",))[0] in POINTS_ONLY:
             raise HamsaError(f"'{path}' is a point cloud: --repair is for meshes")
         from hamsa.io import read_mesh_arrays
         from hamsa.repair import repair_mesh

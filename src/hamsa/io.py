@@ -25,14 +25,26 @@ from hamsa.mesh import TriMesh
 from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 
 FORMATS = ("off", "obj", "ply", "stl")
-POINT_FORMATS = ("xyz", "pts", "txt", "npy", "off", "obj", "ply")
+POINTS_ONLY = ("xyz", "pts", "txt", "npy")  # formats that hold points and never faces
+POINT_FORMATS = (*POINTS_ONLY, "off", "obj", "ply")
+
+
+def _suffix(path: str | os.PathLike) -> tuple[str, bool]:
+    """(format, gzipped) from a file name such as ``cat0.off.gz``: the last suffix before an optional ``.gz``."""
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    gzipped = bool(suffixes) and suffixes[-1] == ".gz"
+    fmt = suffixes[-2 if gzipped else -1].lstrip(".") if len(suffixes) > gzipped else ""
+    return fmt, gzipped
+
+
+def _naming(path, exc: MeshError) -> MeshError:
+    """``exc`` with the file's name in front, unless its message names the file already."""
+    return MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}")
 
 
 def point_format(path: str | os.PathLike) -> tuple[str, bool] | None:
     """(format, gzipped) of a point file (``scan.xyz``, ``points.npy``, ``cloud.ply.gz``), None for other names."""
-    suffixes = [s.lower() for s in Path(path).suffixes]
-    gzipped = bool(suffixes) and suffixes[-1] == ".gz"
-    fmt = suffixes[-2 if gzipped else -1].lstrip(".") if len(suffixes) > gzipped else ""
+    fmt, gzipped = _suffix(path)
     if fmt not in POINT_FORMATS or (fmt == "npy" and gzipped):
         return None
     return fmt, gzipped
@@ -47,8 +59,7 @@ def load_shape(
     ``manifold`` as in :func:`load_mesh`, ``neighbors`` as in :class:`~hamsa.pointcloud.PointCloud`. Raises
     MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
     """
-    fmt = point_format(path)
-    if fmt is not None and fmt[0] in ("xyz", "pts", "txt", "npy"):
+    if _suffix(path)[0] in POINTS_ONLY:
         return load_point_cloud(path, neighbors)
     try:
         vertices, faces = read_mesh_arrays(path)
@@ -56,7 +67,7 @@ def load_shape(
             return PointCloud(vertices, neighbors=neighbors)
         return TriMesh(vertices, faces, manifold=manifold)
     except MeshError as exc:
-        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
+        raise _naming(path, exc) from None
 
 
 def load_point_cloud(path: str | os.PathLike, neighbors: int = DEFAULT_NEIGHBORS) -> PointCloud:
@@ -93,16 +104,12 @@ def load_point_cloud(path: str | os.PathLike, neighbors: int = DEFAULT_NEIGHBORS
     except (ValueError, UnicodeDecodeError) as exc:
         raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
     except MeshError as exc:
-        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
+        raise _naming(path, exc) from None
 
 
 def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
     """Return (format, gzipped) from a file name such as ``cat0.off.gz``."""
-    suffixes = [s.lower() for s in Path(path).suffixes]
-    gzipped = bool(suffixes) and suffixes[-1] == ".gz"
-    if gzipped:
-        suffixes = suffixes[:-1]
-    fmt = suffixes[-1].lstrip(".") if suffixes else ""
+    fmt, gzipped = _suffix(path)
     if fmt not in FORMATS:
         raise MeshError(f"cannot tell the mesh format of '{path}': use one of .off .obj .ply .stl (optionally .gz)")
     return fmt, gzipped
@@ -145,7 +152,7 @@ def load_mesh(path: str | os.PathLike, repair: bool = False, *, manifold: bool =
 
         mesh, _, report = repair_mesh(vertices, faces)
     except MeshError as exc:
-        raise MeshError(exc.args[0] if str(path) in exc.args[0] else f"'{path}': {exc}") from None
+        raise _naming(path, exc) from None
     if report.changed:
         warnings.warn(f"'{path}': {report}", RepairWarning, stacklevel=2)
     return mesh
