@@ -110,6 +110,24 @@ class TriMesh:
         return float(self.face_areas.sum())
 
     @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(n, 3) unit vertex normals: the area-weighted mean of the incident faces' normals, which follow the
+        face winding (counter-clockwise seen from the side they point to); zero at an unreferenced vertex."""
+        v, f = self._vertices, self._faces
+        face_normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        normals = np.zeros_like(v)
+        for c in range(3):
+            np.add.at(normals, f[:, c], face_normal)
+        return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+
+    @cached_property
+    def signed_volume(self) -> float:
+        """``sum_f x_0 . (x_1 x x_2) / 6``: the enclosed volume, positive when the faces wind outward (normals
+        pointing out) on a closed, consistently oriented surface; on a surface with small holes, nearly so."""
+        v, f = self._vertices, self._faces
+        return float(np.einsum("ij,ij->", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])) / 6.0)
+
+    @cached_property
     def edge_lengths(self) -> np.ndarray:
         """(e,) length of each unique edge, in the order of :attr:`edges`."""
         v = self._vertices

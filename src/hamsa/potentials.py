@@ -14,7 +14,7 @@ import numpy as np
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError, PotentialError
-from hamsa.mesh import TriMesh, as_trimesh
+from hamsa.mesh import as_trimesh
 from hamsa.operators import stiffness_matrix, vertex_areas
 from hamsa.pointcloud import as_shape
 
@@ -164,7 +164,7 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
         value = np.linalg.norm(laplacian, axis=1) / (2 * areas)
         if kind == "absolute_mean":
             return value
-        return value * np.sign(np.einsum("ij,ij->i", laplacian, _vertex_normals(mesh)) + 0.0)
+        return value * np.sign(np.einsum("ij,ij->i", laplacian, mesh.vertex_normals) + 0.0)
     if kind == "gaussian":
         v, f = mesh.vertices, mesh.faces
         angles = np.zeros(mesh.n_vertices)
@@ -178,12 +178,3 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
         full[boundary] = np.pi
         return (full - angles) / areas
     raise HamsaError(f"curvature kind must be 'mean', 'absolute_mean' or 'gaussian', got {kind!r}")
-
-
-def _vertex_normals(mesh: TriMesh) -> np.ndarray:
-    v, f = mesh.vertices, mesh.faces
-    face_normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    normals = np.zeros_like(v)
-    for c in range(3):
-        np.add.at(normals, f[:, c], face_normal)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
