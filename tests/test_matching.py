@@ -426,6 +426,68 @@ def test_signs_without_truth_agree_with_the_true_signs_on_an_isometry(pair):
         resolve_signs_without_truth(source, flipped, (25,))
 
 
+@pytest.fixture(scope="module")
+def posed_humanoids():
+    """The built-in humanoid at rest and walking (vertex i corresponds to vertex i), unit area, 20 pairs each."""
+    rest = shapes.humanoid("rest", spacing=0.025).scaled_to_unit_area()
+    walk = shapes.humanoid("walk", spacing=0.025).scaled_to_unit_area()
+    return (rest, walk), (hamsa.eigenbasis(rest, 20), hamsa.eigenbasis(walk, 20))
+
+
+def _flipped(basis, flips):
+    return Eigenbasis(basis.values, basis.vectors * np.r_[1.0, flips, np.ones(basis.k - 1 - len(flips))], basis.mass)
+
+
+def test_signs_without_truth_tell_a_function_from_its_mirror_image(posed_humanoids):
+    """On a left-right symmetric body the HKS moments of an antisymmetric eigenfunction vanish, so only the
+    surfaces' orientation (the chirality term) can give its sign; with it every pattern of flips is undone."""
+    from hamsa.matching import intrinsic_symmetry_signs, resolve_signs, resolve_signs_without_truth
+
+    meshes, (rest, walk) = posed_humanoids
+    indices = (1, 2, 3, 4)
+    parity = intrinsic_symmetry_signs(rest)[0][1:5]
+    assert parity.tolist() == [1, -1, -1, 1]  # psi_2, psi_3 reversed by the left-right symmetry
+    symmetric = parity > 0
+    for flips in ([1, 1, 1, 1], [1, -1, 1, -1], [-1, -1, 1, 1], [-1, 1, -1, -1]):
+        target = _flipped(walk, flips)
+        truth = resolve_signs(rest, target, np.arange(rest.n), indices)
+        assert truth.tolist() == flips
+        np.testing.assert_array_equal(resolve_signs_without_truth(rest, target, indices, meshes=meshes), truth)
+        intrinsic = resolve_signs_without_truth(rest, target, indices)
+        np.testing.assert_array_equal(intrinsic[symmetric], truth[symmetric])
+
+
+def test_signs_without_truth_ignore_rigid_motions_winding_and_a_common_reflection(posed_humanoids):
+    from hamsa.matching import resolve_signs_without_truth
+
+    (rest_mesh, walk_mesh), (rest, walk) = posed_humanoids
+    target = _flipped(walk, [1, -1, -1, 1])
+    expected = resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=(rest_mesh, walk_mesh))
+    angle = 0.9
+    rotation = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    moved = hamsa.TriMesh(walk_mesh.vertices @ rotation.T + [3.0, -1.0, 2.0], walk_mesh.faces)
+    inward = hamsa.TriMesh(walk_mesh.vertices, walk_mesh.faces[:, ::-1])
+    assert inward.signed_volume == pytest.approx(-walk_mesh.signed_volume)
+    mirror = np.diag([-1.0, 1.0, 1.0])
+    mirrored = tuple(hamsa.TriMesh(m.vertices @ mirror, m.faces) for m in (rest_mesh, walk_mesh))
+    for meshes in ((rest_mesh, moved), (rest_mesh, inward), mirrored):
+        np.testing.assert_array_equal(resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=meshes), expected)
+
+
+def test_signs_without_truth_on_point_clouds_use_the_moments_alone(posed_humanoids):
+    from hamsa.matching import resolve_signs_without_truth
+
+    meshes, (rest, walk) = posed_humanoids
+    target = _flipped(walk, [-1, 1, 1, -1])
+    clouds = tuple(hamsa.PointCloud(m.vertices) for m in meshes)
+    np.testing.assert_array_equal(
+        resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=clouds),
+        resolve_signs_without_truth(rest, target, (1, 2, 3, 4)),
+    )
+    with pytest.raises(HamsaError, match="vertices"):
+        resolve_signs_without_truth(rest, target, (1, 2), meshes=(meshes[0], shapes.icosphere(2)))
+
+
 def test_intrinsic_symmetry_signs_find_a_reflection_of_a_rectangle():
     """A 2 x 0.7 rectangle (simple Neumann eigenvalues over the first 15): its three non-identity
     symmetries (the two mirror reflections and the half turn) act on each eigenfunction

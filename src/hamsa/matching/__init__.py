@@ -24,7 +24,12 @@ from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors, nearest_rows
 from hamsa.matching.pipeline import METHODS, match
 from hamsa.matching.sgfe import match_sgfe, spectral_gradient_fields
-from hamsa.matching.signs import intrinsic_symmetry_signs, resolve_signs, resolve_signs_without_truth
+from hamsa.matching.signs import (
+    intrinsic_symmetry_signs,
+    matching_potentials,
+    resolve_signs,
+    resolve_signs_without_truth,
+)
 
 __all__ = [
     "METHODS",
@@ -37,6 +42,7 @@ __all__ = [
     "match_descriptors",
     "match_icskm",
     "match_sgfe",
+    "matching_potentials",
     "nearest_rows",
     "offdiagonal_energy",
     "resolve_signs",

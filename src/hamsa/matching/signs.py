@@ -7,8 +7,8 @@ from scipy.spatial import cKDTree
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.matching.functional import functional_map, icp_refine
 from hamsa.matching.nearest import nearest_in
+from hamsa.mesh import TriMesh
 
 
 def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, indices) -> np.ndarray:
@@ -29,28 +29,90 @@ def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, 
     return np.where(products >= 0, 1.0, -1.0)
 
 
-def resolve_signs_without_truth(source: Eigenbasis, target: Eigenbasis, indices, k: int = 20) -> np.ndarray:
+def resolve_signs_without_truth(
+    source: Eigenbasis, target: Eigenbasis, indices, meshes=None, scales: int = 6
+) -> np.ndarray:
     """Signs s_j for the target eigenfunctions j in ``indices`` from the shapes alone (no ground truth).
 
-    An HKS-fitted functional map on the first ``k`` eigenpairs, refined by ICP (:func:`icp_refine`),
-    estimates ``C_jj = <phi_j^source, phi_j^target o map>_A``; ``s_j = sign(C_jj)``. The HKS cannot tell a
-    shape from its mirror image, so on a left-right symmetric shape the signs of antisymmetric
-    eigenfunctions can come out as the mirror map's: the potential is then consistent with the mirrored
-    correspondence (compare :func:`resolve_signs`, which uses the true map).
+    Each function gets a feature vector on each shape that flips with its sign, and
+    ``s_j = sign(<f_j^source, f_j^target>)``:
+
+    - **moments** ``int h_t psi_j dA`` against the scaled heat kernel signature h_t (normalized to mean 1)
+      at ``scales`` times (:func:`~hamsa.diffusion.default_hks_times` of the source). The HKS does not
+      depend on signs, so these moments correspond between near-isometric shapes; they vanish for a
+      function that an intrinsic left-right symmetry reverses (psi_j o T = -psi_j), because h_t is
+      symmetric.
+    - with ``meshes`` (the two triangle meshes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times
+      t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal, N oriented so that the signed
+      volume is positive) and ``x_j = int psi_j (X - X_mean) dA`` (the function's first moment in space),
+      each vector normalized. The determinant is unchanged by rotations, translations and scaling and
+      reverses under a reflection, so it tells an antisymmetric function from its mirror image — which
+      no intrinsic quantity can — and it is largest exactly where the moments vanish. It needs the
+      surfaces' orientation, so point clouds get the moments alone; on a left-right symmetric cloud the
+      antisymmetric functions' signs are then a coin toss.
+
+    Like :func:`resolve_signs` it assumes the functions correspond in order (no swap of near-equal
+    eigenvalues) and shapes posed alike up to a rigid motion; a reflected scan gives the mirrored signs.
+
+    Raises
+    ------
+    HamsaError
+        If an index is not below min(source.k, target.k), or the meshes do not match the bases.
     """
     from hamsa.diffusion import default_hks_times, heat_kernel_signature
+    from hamsa.pointcloud import as_shape
 
     indices = np.asarray(indices)
-    k = min(k, source.k, target.k)
+    k = min(source.k, target.k)
     if indices.max() >= k:
         raise HamsaError(f"indices must be below k = {k}")
-    small = source.truncate(k), target.truncate(k)
-    times = default_hks_times(small[0], 30)
-    C = functional_map(
-        *small, heat_kernel_signature(small[0], times, scaled=True), heat_kernel_signature(small[1], times, scaled=True)
-    )
-    C, _ = icp_refine(C, *small)
-    return np.where(C[indices, indices] >= 0, 1.0, -1.0)
+    times = default_hks_times(source, int(scales))
+    shapes = (None, None) if meshes is None else tuple(as_shape(shape) for shape in meshes)
+    oriented = all(isinstance(shape, TriMesh) for shape in shapes)
+    features = []
+    for basis, shape in zip((source, target), shapes):
+        if shape is not None and shape.n_vertices != basis.n:
+            raise HamsaError(f"a mesh has {shape.n_vertices} vertices, its basis {basis.n}")
+        weights = basis.mass.diagonal()
+        heat = heat_kernel_signature(basis, times, scaled=True)
+        heat = heat / (weights @ heat)
+        functions = basis.vectors[:, indices]
+        parts = [(weights[:, None] * heat).T @ functions]  # (T, m) moments
+        if oriented:
+            parts.append(_chirality(shape, weights, heat, functions))
+        features.append(np.concatenate(parts))
+    return np.where(np.sum(features[0] * features[1], axis=0) >= 0, 1.0, -1.0)
+
+
+def matching_potentials(
+    source: Eigenbasis, target: Eigenbasis, meshes=None, indices=(1, 2, 3, 4), signs=None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(V_source, V_target)``: the paper's matching potential on both shapes, made to correspond.
+
+    Each is :func:`hamsa.potentials.eigenfunction_sum` of the LBO bases' functions ``indices`` divided by
+    its maximum (so V lies in [0, 1]; scale it for a stronger potential), the target's eigenfunction signs
+    being ``signs`` or, by default, those of :func:`resolve_signs_without_truth` (with ``meshes``, the two
+    shapes, for the orientation term): no ground truth needed. Pass ``signs=resolve_signs(...)`` with a
+    known map to reproduce the paper's oracle.
+    """
+    from hamsa.potentials import eigenfunction_sum
+
+    if signs is None:
+        signs = resolve_signs_without_truth(source, target, indices, meshes=meshes)
+    V_s, V_t = eigenfunction_sum(source, indices), eigenfunction_sum(target, indices, signs=signs)
+    return V_s / V_s.max(), V_t / V_t.max()
+
+
+def _chirality(mesh: TriMesh, weights: np.ndarray, heat: np.ndarray, functions: np.ndarray) -> np.ndarray:
+    """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of :func:`resolve_signs_without_truth`."""
+    outward = np.sign(mesh.signed_volume) or 1.0
+    centred = mesh.vertices - weights @ mesh.vertices / weights.sum()
+    normals = (weights[:, None] * heat).T @ (outward * mesh.vertex_normals)  # (T, 3)
+    moments = functions.T @ (weights[:, None] * centred)  # (m, 3)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    moments /= np.maximum(np.linalg.norm(moments, axis=1, keepdims=True), 1e-300)
+    t, u = np.triu_indices(len(normals), 1)
+    return np.cross(normals[t], normals[u]) @ moments.T
 
 
 def intrinsic_symmetry_signs(
