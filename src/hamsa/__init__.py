@@ -8,7 +8,7 @@ the library's submodules (``hamsa.diffusion``, ``hamsa.matching``, ...); the pap
 
 import importlib
 
-__version__ = "0.4.0"
+__version__ = "0.5.0"
 
 _SUBMODULES = (
     "cmm", "compression", "datasets", "diffusion", "errors", "evaluation", "files", "geodesic", "io", "matching",

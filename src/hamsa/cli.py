@@ -194,6 +194,13 @@ def _parser() -> argparse.ArgumentParser:
         "(default 1; 0 = the LBO)",
     )
     match.add_argument(
+        "--basis",
+        choices=("hamiltonian", "lbo"),
+        default="hamiltonian",
+        help="fmap, hks, wks: the Hamiltonian basis with the paper's matching potential (sum of phi_2..phi_5, its "
+        "signs made consistent from the shapes alone, no ground truth; default) or the plain LBO basis",
+    )
+    match.add_argument(
         "--repair",
         action="store_true",
         help=REPAIR_HELP + "; the map is saved in the inputs' vertex ids (-1 for source vertices removed)",
@@ -213,8 +220,8 @@ def _parser() -> argparse.ArgumentParser:
         default=list(BENCHMARK_METHODS),
         help="hks, wks: descriptor nearest neighbours; fmap: functional map + ICP + ZoomOut; icskm: the paper's "
         "ICSKM from --landmarks ground-truth pairs; icskm_geo: the same plus geodesic distances from the landmarks "
-        "as features; sgfe: spectral gradient fields (area-distortion potential); texture: HKS with a synthetic "
-        "dalmatian-coat potential (default: all)",
+        "as features; sgfe: spectral gradient fields (with --oracle: the area-distortion potential); texture: HKS "
+        "with a synthetic dalmatian-coat potential carried by the ground truth (default: all)",
     )
     bench.add_argument(
         "--landmarks",
@@ -239,14 +246,13 @@ def _parser() -> argparse.ArgumentParser:
         "--eigensum-scale",
         type=float,
         default=1.0,
-        help="hks/wks/fmap: scale of the matching potential (normalized sum of phi_2..phi_5 in [0, 1]; default 1)",
+        help="hks/wks/fmap/sgfe: scale of the matching potential (normalized sum of phi_2..phi_5 in [0, 1]; default 1)",
     )
     bench.add_argument(
-        "--signs",
-        choices=("truth", "descriptors"),
-        default="truth",
-        help="how that potential's eigenfunction signs are made consistent: with the ground truth (the paper's "
-        "assumption, default) or from HKS functional maps alone",
+        "--oracle",
+        action="store_true",
+        help="build the Hamiltonians' potentials from the ground truth, as the paper does (the eigenfunction sum's "
+        "signs, SGFE's area distortion); default: from the shapes alone, the truth only scores",
     )
     bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
     bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
@@ -556,14 +562,15 @@ def _match(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.files import atomic_write
     from hamsa.geodesic import geodesic_distance
-    from hamsa.matching import match
+    from hamsa.matching import match, matching_potentials
 
     output = _output_path(args, ".npy", args.source, args.target)
     start = time.perf_counter()
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
-    with _Steps(args, 4) as step:
+    eigensum = args.method != "icskm" and args.basis == "hamiltonian"
+    with _Steps(args, 6 if eigensum else 4) as step:
         step("reading the meshes")
         loaded = [_load_shape(path, args.repair) for path in (args.source, args.target)]
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
@@ -576,8 +583,14 @@ def _match(args) -> None:
             ]
         bases = []
         for side, mesh, potential in zip(("source", "target"), meshes, V):
-            step(f"{side} eigenbasis (k = {k}, n = {mesh.n_vertices})")
+            step(f"{side} {'LBO ' if eigensum else ''}eigenbasis (k = {k}, n = {mesh.n_vertices})")
             bases.append(eigenbasis(mesh, k, potential))
+        if eigensum:
+            V = matching_potentials(*bases, meshes=meshes)
+            bases = []
+            for side, mesh, potential in zip(("source", "target"), meshes, V):
+                step(f"{side} Hamiltonian eigenbasis, matching potential (k = {k}, n = {mesh.n_vertices})")
+                bases.append(eigenbasis(mesh, k, potential))
         step(f"matching ({args.method})")
         mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes)
     mapped = len(mapping)
@@ -586,9 +599,10 @@ def _match(args) -> None:
         print(f"map in input vertex ids; {int(np.sum(mapping < 0))} source vertices removed by --repair map to -1")
     with atomic_write(output) as handle:
         np.save(handle, mapping)
+    basis = "matching potential" if eigensum else "LBO" if V[0] is None else "landmark potential"
     print(
-        f"{args.method}: mapped {mapped} source vertices onto {meshes[1].n_vertices} target vertices "
-        f"(k = {k}) in {time.perf_counter() - start:.1f} s"
+        f"{args.method} ({basis} basis): mapped {mapped} source vertices onto {meshes[1].n_vertices} target "
+        f"vertices (k = {k}) in {time.perf_counter() - start:.1f} s"
     )
     print(f"wrote           {output}")
 
@@ -670,7 +684,7 @@ def _benchmark_matching(args) -> None:
         args.scheduler,
         landmarks=args.landmarks,
         eigensum_scale=args.eigensum_scale,
-        signs=args.signs,
+        oracle=args.oracle,
         draws=args.draws,
         landmark_scale=args.landmark_scale,
     )

@@ -2,10 +2,12 @@
 
 For a pair (source, target) with a ground-truth map, :func:`evaluate_pair` builds the bases — the LBO's
 and the Hamiltonian's with the paper's matching potential V = normalized sum of phi_2..phi_5 scaled to
-[0, 1] (eigenfunction signs resolved by the ground truth, as the paper assumes) — runs the
-matchers and scores them by the Kim et al. protocol (geodesic error on the target / sqrt(area), no
-symmetries, on a seeded sample of source vertices; in :func:`benchmark_dataset` each shape is reduced to
-its largest connected component first, as in Kim et al.'s benchmark, whose gorilla is the body alone):
+[0, 1], its eigenfunction signs made consistent across the pair without the ground truth
+(:func:`hamsa.matching.resolve_signs_without_truth`; ``oracle=True``: by the ground truth, as the
+paper assumes) — runs the matchers and scores them by the Kim et al. protocol (geodesic error on the
+target / sqrt(area), no symmetries, on a seeded sample of source vertices; in :func:`benchmark_dataset`
+each shape is reduced to its largest connected component first, as in Kim et al.'s benchmark, whose
+gorilla is the body alone):
 
 * ``hks`` / ``wks``: nearest neighbours of the heat / wave kernel signatures;
 * ``fmap``: an HKS-fitted 20 x 20 functional map, ICP, then ZoomOut up to k;
@@ -15,13 +17,14 @@ its largest connected component first, as in Kim et al.'s benchmark, whose goril
 * ``icskm_geo``: the same with the geodesic distances from each landmark as extra coordinates of the
   embedding (both bases) — hamsa's best pipeline on SCAPE, not one of the paper's;
 * ``sgfe``: the spectral gradient fields embedding (Shtern & Kimmel 2015) refining the ``fmap`` start
-  (HKS functional map + ICP on 20 eigenpairs); its Hamiltonian is the paper's area-distortion potential
-  (eq. stablePotential, ``AREA_MU`` x V with V >= 1 from the ground-truth map, as in the paper's Fig.
-  bench_area — an oracle potential that shows what a good mask of the stretching regions buys).
-* ``texture``: HKS nearest neighbours with the paper's texture potential, V = ``TEXTURE_MU`` x luminance
-  of a synthetic dalmatian coat (:func:`hamsa.potentials.dalmatian_texture`, seeded) painted on the
-  source and carried to the target by the ground truth (the datasets have no photometry; the paper
-  shows it on the TOSCA dogs).
+  (HKS functional map + ICP on 20 eigenpairs), with the same matching potential; with ``oracle=True``
+  its Hamiltonian is the paper's area-distortion potential instead (eq. stablePotential, ``AREA_MU`` x V
+  with V >= 1 from the ground-truth map, as in the paper's Fig. bench_area: what a good mask of the
+  stretching regions buys).
+* ``texture`` (always an oracle): HKS nearest neighbours with the paper's texture potential, V =
+  ``TEXTURE_MU`` x luminance of a synthetic dalmatian coat (:func:`hamsa.potentials.dalmatian_texture`,
+  seeded) painted on the source and carried to the target by the ground truth (the datasets have no
+  photometry; the paper shows it on the TOSCA dogs).
 
 :func:`benchmark_dataset` runs every evaluation pair of a :class:`~hamsa.datasets.Dataset` in parallel
 (joblib processes; a Dask cluster through joblib's backend when given a scheduler address) with a
@@ -45,14 +48,15 @@ from hamsa.errors import HamsaError
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
 from hamsa.files import atomic_write
 from hamsa.geodesic import geodesic_distance
-from hamsa.matching import match, resolve_signs, resolve_signs_without_truth
+from hamsa.matching import match, matching_potentials, resolve_signs
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
 AREA_MU = 100.0
 TEXTURE_MU = 100.0
 # the Hamiltonian of these methods has its own potential (the others: the paper's eigenfunction sum)
-_POTENTIAL_OF = {"icskm": "landmarks", "icskm_geo": "landmarks", "sgfe": "area", "texture": "texture"}
+_POTENTIAL_OF = {"icskm": "landmarks", "icskm_geo": "landmarks", "texture": "texture"}
+_ORACLE_POTENTIAL_OF = {**_POTENTIAL_OF, "sgfe": "area"}
 SIGNS = ("truth", "descriptors")
 BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
@@ -69,36 +73,35 @@ def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.n
 def paired_bases(
     source: TriMesh,
     target: TriMesh,
-    ground_truth,
-    k: int,
+    ground_truth=None,
+    k: int = 100,
     cache_dir=None,
     eigensum_scale: float = 1.0,
-    signs: str = "truth",
+    signs: str = "descriptors",
 ) -> dict:
     """{"lbo": (source basis, target basis), "hamiltonian": (...)} with the paper's matching potential
     ``eigensum_scale x`` (normalized sum of phi_2..phi_5, scaled to [0, 1]).
 
-    ``signs``: "truth" resolves the eigenfunction signs with ``ground_truth`` (n_source,) target ids (-1
-    where unknown), as the paper assumes; "descriptors" without it
-    (:func:`hamsa.matching.resolve_signs_without_truth`).
+    ``signs``: "descriptors" (default) makes the target's eigenfunction signs agree with the source's from
+    the two shapes alone (:func:`hamsa.matching.resolve_signs_without_truth`, HKS moments and the
+    surfaces' orientation); "truth" with ``ground_truth`` (n_source,) target ids (-1 where unknown), as
+    the paper assumes (an oracle).
     """
     if signs not in SIGNS:
         raise HamsaError(f"signs must be one of {SIGNS}, got {signs!r}")
     if not (np.isfinite(eigensum_scale) and eigensum_scale > 0):
         raise HamsaError(f"eigensum_scale must be a positive number, got {eigensum_scale}")
+    if signs == "truth" and ground_truth is None:
+        raise HamsaError("signs='truth' needs the ground truth")
     solve = _basis_solver(k, cache_dir)
     lbo = solve(source), solve(target)
-    if signs == "truth":
-        target_signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4))
-    else:
-        target_signs = resolve_signs_without_truth(*lbo, (1, 2, 3, 4))
-    V_s = potentials.eigenfunction_sum(lbo[0])
-    V_t = potentials.eigenfunction_sum(lbo[1], signs=target_signs)
+    truth_signs = resolve_signs(*lbo, np.asarray(ground_truth), (1, 2, 3, 4)) if signs == "truth" else None
+    V_s, V_t = matching_potentials(*lbo, meshes=(source, target), signs=truth_signs)
     return {
         "lbo": lbo,
         "hamiltonian": (
-            solve(source, eigensum_scale * V_s / V_s.max()),
-            solve(target, eigensum_scale * V_t / V_t.max()),
+            solve(source, eigensum_scale * V_s),
+            solve(target, eigensum_scale * V_t),
         ),
     }
 
@@ -114,7 +117,7 @@ def evaluate_pair(
     cache_dir=None,
     landmarks: int = 3,
     eigensum_scale: float = 1.0,
-    signs: str = "truth",
+    oracle: bool = False,
     draws: int = 1,
     landmark_scale: float = 1.0,
 ) -> dict:
@@ -123,8 +126,10 @@ def evaluate_pair(
     ``landmarks``: ground-truth pairs given to ``icskm`` / ``icskm_geo`` (drawn with ``seed`` among the
     vertices that have a true image; the same for both bases). ``draws``: independent landmark draws
     (seeds ``seed + 1``, ``seed + 2``, ...; the first is the single draw's) whose errors are pooled, so
-    the scores of the landmark methods are means over draws. ``eigensum_scale``, ``signs``: the matching
-    potential's scale and how its eigenfunction signs are resolved (see :func:`paired_bases`).
+    the scores of the landmark methods are means over draws. ``eigensum_scale``: the matching potential's
+    scale (see :func:`paired_bases`). ``oracle``: build the potentials from the ground truth as the paper
+    does (the matching potential's signs, SGFE's area distortion) instead of from the shapes alone; the
+    ground truth is otherwise used only to score (and, as always, for ``texture`` and the landmarks).
     ``landmark_scale``: the scale of the landmark potential, the geodesic distance from the landmarks in
     [0, 1]; on a unit-area shape the Laplacian eigenvalues are O(10)-O(1000) at k = 100, so a scale of 1
     barely moves the basis and 10-100 starts to localize the low functions near the landmarks."""
@@ -139,11 +144,13 @@ def evaluate_pair(
     chosen = candidates[sample_points(len(candidates), points, seed)]
     distances = TruthDistances(target, truth[chosen])
     solve = _basis_solver(k, cache_dir)
-    if all(method in _POTENTIAL_OF for method in methods):  # the eigenfunction-sum Hamiltonian is not used
+    potential_of = _ORACLE_POTENTIAL_OF if oracle else _POTENTIAL_OF
+    if all(method in potential_of for method in methods):  # the eigenfunction-sum Hamiltonian is not used
         bases = {"lbo": (solve(source), solve(target))}
     else:
+        signs = "truth" if oracle else "descriptors"
         bases = paired_bases(source, target, truth, k, cache_dir, eigensum_scale, signs)
-    wanted = {_POTENTIAL_OF.get(method) for method in methods}
+    wanted = {potential_of.get(method) for method in methods}
     special = {}  # potential name -> (source V, target V) of the Hamiltonians other than the paper's default
     if "area" in wanted:
         V_s, V_t = _area_distortion_potentials(source, target, truth)
@@ -164,9 +171,9 @@ def evaluate_pair(
     for method in methods:
         for basis in BASES:
             pooled = []
-            for pairs, hamiltonians in runs["landmarks" if _POTENTIAL_OF.get(method) == "landmarks" else None]:
-                if basis == "hamiltonian" and method in _POTENTIAL_OF:
-                    pair = hamiltonians[_POTENTIAL_OF[method]]
+            for pairs, hamiltonians in runs["landmarks" if potential_of.get(method) == "landmarks" else None]:
+                if basis == "hamiltonian" and method in potential_of:
+                    pair = hamiltonians[potential_of[method]]
                 else:
                     pair = bases[basis]
                 mapping = match_pair(method, *pair, landmarks=pairs, meshes=(source, target))
@@ -250,7 +257,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         cache_dir=settings["cache"],
         landmarks=settings.get("landmarks", 3),
         eigensum_scale=settings.get("eigensum_scale", 1.0),
-        signs=settings.get("signs", "truth"),
+        oracle=settings.get("oracle", False),
         draws=settings.get("draws", 1),
         landmark_scale=settings.get("landmark_scale", 1.0),
     )
@@ -290,7 +297,7 @@ def benchmark_dataset(
     progress: bool = True,
     landmarks: int = 3,
     eigensum_scale: float = 1.0,
-    signs: str = "truth",
+    oracle: bool = False,
     draws: int = 1,
     landmark_scale: float = 1.0,
 ) -> dict:
@@ -312,7 +319,9 @@ def benchmark_dataset(
     landmarks : ground-truth landmark pairs given to ``icskm`` (1, 2 or 3 in the paper)
     draws : independent landmark draws per pair, pooled (:func:`evaluate_pair`)
     landmark_scale : scale of the icskm / icskm_geo Hamiltonian's landmark potential (:func:`evaluate_pair`)
-    eigensum_scale, signs : the hks/wks/fmap matching potential's scale and sign resolution (:func:`paired_bases`)
+    eigensum_scale : the hks/wks/fmap/sgfe matching potential's scale (:func:`paired_bases`)
+    oracle : build the potentials from the ground truth, as the paper does (:func:`evaluate_pair`); the
+        table's ``potentials`` field says which
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -326,8 +335,10 @@ def benchmark_dataset(
             settings["draws"] = int(draws)
         if landmark_scale != 1.0:  # (likewise)
             settings["landmark_scale"] = float(landmark_scale)
-    if eigensum_scale != 1.0 or signs != "truth":  # (the defaults stay out of the key: earlier results remain valid)
-        settings.update(eigensum_scale=float(eigensum_scale), signs=signs)
+    if eigensum_scale != 1.0:  # (the default stays out of the key: earlier results remain valid)
+        settings["eigensum_scale"] = float(eigensum_scale)
+    if oracle:
+        settings["oracle"] = True
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
@@ -340,6 +351,7 @@ def benchmark_dataset(
     results = _run_parallel(dataset, todo, settings, jobs, scheduler, progress)
     records += [result for result in results if "error" not in result]
     table = summarize(records, dataset.name, dataset.classes)
+    table["potentials"] = "oracle (from the ground truth)" if oracle else "estimated (no ground truth)"
     failed = [result for result in results if "error" in result]
     if failed:
         table["failed"] = sorted(failed, key=lambda result: (result["source"], result["target"]))
@@ -398,11 +410,11 @@ def _mean_rows(records: list[dict], label: dict) -> list[dict]:
 
 def table_markdown(table: dict) -> str:
     """The summary as Markdown: one table per dataset, then one per class when there are several."""
-    lines = []
+    lines = [f"Hamiltonian potentials: {table['potentials']}.", ""] if "potentials" in table else []
     for key, rows in (("dataset", table["rows"]), ("class", table.get("by_class", []))):
         if not rows:
             continue
-        if lines:
+        if key == "class":
             lines.append("")
         lines += [
             f"| {key} | method | basis | pairs | AUC [0, 0.25] | mean error | within 0.05 |",

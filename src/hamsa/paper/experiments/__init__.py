@@ -38,7 +38,7 @@ EXPERIMENTS = (
     Experiment("fig7_optimize_hand", "Fig. 7 — an optimized potential represents a hand's coordinates"),
     Experiment("fig8_compression", "Fig. 8 — spectral mesh compression, rate vs distortion"),
     Experiment("fig9_cmm", "Fig. 9 — compressed manifold modes: IRLS vs ADMM"),
-    Experiment("fig10_matching", "Fig. 10 — shape matching: Kim et al. curves, LBO vs Hamiltonian"),
+    Experiment("fig10_matching", "Fig. 10 — shape matching: Kim et al. curves, LBO vs Hamiltonian, oracle potentials"),
     Experiment("fig11_dalmatian", "Fig. dalmatian — a texture potential for matching the TOSCA dogs"),
     Experiment("claims_checks", "Numerical checks of the paper's theorems (T1–T5, T8, T13, T15)"),
 )
