@@ -179,3 +179,43 @@ def test_killed_run_resumes_without_redoing_finished_experiments(tmp_path):
     again = reproduce(tmp_path, quick=True, only=["fig1"], progress=False)
     assert again["experiments"]["fig1_harmonics_1d"]["cached"] is False
     assert again["experiments"]["fig6_optimize_1d"]["cached"] is True  # --only keeps the others' results
+
+
+def test_every_experiments_numbers_read_back_as_its_result_type(report):
+    """The JSON each experiment wrote is exactly what its typed result turns into, and reads back as it."""
+    from hamsa.paper.experiments import EXPERIMENTS
+    from hamsa.paper.results import from_json, to_json
+
+    folder, results = report
+    for experiment in EXPERIMENTS:
+        numbers = results["experiments"][experiment.name]["numbers"]
+        typed = from_json(experiment.result_type, numbers)
+        assert isinstance(typed, experiment.result_type)
+        assert to_json(typed) == numbers == json.loads((folder / f"{experiment.name}.json").read_text())
+
+
+def test_each_claim_reads_the_result_type_of_the_experiment_it_names():
+    import typing
+
+    from hamsa.paper.claims import CLAIMS
+    from hamsa.paper.experiments import EXPERIMENTS
+
+    types = {e.name: e.result_type for e in EXPERIMENTS}
+    for claim in CLAIMS:
+        hints = typing.get_type_hints(claim.judge)
+        assert list(hints.values())[0] is types[claim.source], claim.id
+
+
+def test_a_cached_record_of_another_shape_is_recomputed(tmp_path):
+    """A state file whose numbers do not fit the result type (a field renamed by another version of the code,
+    or an edit) is not trusted: the experiment runs again."""
+    from hamsa.paper.reproduce import reproduce
+
+    reproduce(tmp_path, quick=True, only=["fig6"], progress=False)
+    state_path = tmp_path / ".state" / "fig6_optimize_1d.json"
+    state = json.loads(state_path.read_text())
+    state["numbers"]["parametrizations"]["signed"]["ratio"] = "large"
+    state_path.write_text(json.dumps(state))
+    again = reproduce(tmp_path, quick=True, only=["fig6"], progress=False)
+    assert again["experiments"]["fig6_optimize_1d"]["cached"] is False
+    assert isinstance(again["experiments"]["fig6_optimize_1d"]["numbers"]["parametrizations"]["signed"]["ratio"], float)

@@ -32,6 +32,7 @@ from hamsa.files import atomic_write
 from hamsa.paper.claims import evaluate_claims
 from hamsa.paper.experiments import EXPERIMENTS, Experiment
 from hamsa.paper.experiments import _common as common
+from hamsa.paper.results import ResultFormatError, from_json, to_json
 
 
 def _sha256(path: Path) -> str:
@@ -48,14 +49,16 @@ def _output_files(output: Path, experiment: Experiment) -> list[Path]:
     return sorted(p for p in output.glob(f"{experiment.prefix}*") if p.suffix in (".png", ".json"))
 
 
-def _cached(state_path: Path, key: str, output: Path) -> dict | None:
-    """The recorded result when its key matches and every recorded file is intact, else None."""
-    state = load_record(state_path, key)
+def _cached(experiment: Experiment, output: Path, data: str | None, quick: bool) -> dict | None:
+    """The recorded state when its key matches, its numbers read as the experiment's result type and
+    every recorded file is intact, else None."""
+    state = load_record(output / ".state" / f"{experiment.name}.json", input_key(experiment, data, quick))
     if state is None or state.get("status") != "ok":
         return None
     try:
+        from_json(experiment.result_type, state.get("numbers"), experiment.name)
         intact = all(_sha256(output / name) == digest for name, digest in state["files"].items())
-    except (OSError, KeyError, TypeError, AttributeError):
+    except (OSError, KeyError, TypeError, AttributeError, ResultFormatError):
         return None
     return state if intact else None
 
@@ -64,15 +67,15 @@ def run_experiment(experiment: Experiment, output: Path, data: str | None, quick
     """Run one experiment unless an intact cached result exists; returns its state record."""
     state_dir = output / ".state"
     state_dir.mkdir(parents=True, exist_ok=True)
-    state_path = state_dir / f"{experiment.name}.json"
-    key = input_key(experiment, data, quick)
     if not force:
-        cached = _cached(state_path, key, output)
+        cached = _cached(experiment, output, data, quick)
         if cached is not None:
             return {**cached, "cached": True}
     start = time.perf_counter()
     try:
-        numbers = experiment.module().run(SimpleNamespace(output=str(output), data=data, quick=quick))
+        result = experiment.module().run(SimpleNamespace(output=str(output), data=data, quick=quick))
+        numbers = to_json(result)
+        from_json(experiment.result_type, numbers, experiment.name)  # what a cached run will be read as
     except Exception as error:  # recorded in the report; the other experiments still run
         return {
             "name": experiment.name,
@@ -86,13 +89,17 @@ def run_experiment(experiment: Experiment, output: Path, data: str | None, quick
     state = {
         "name": experiment.name,
         "status": "ok",
-        "key": key,
+        "key": input_key(experiment, data, quick),
         "files": files,
-        "numbers": common.plain(numbers),
+        "numbers": numbers,
         "seconds": round(time.perf_counter() - start, 2),
     }
-    save_record(state_path, state)
+    save_record(state_dir / f"{experiment.name}.json", state)
     return {**state, "cached": False}
+
+
+def _ok(records: dict, experiment: Experiment) -> bool:
+    return experiment.name in records and records[experiment.name]["status"] == "ok"
 
 
 def _names(name: str, given: str) -> bool:
@@ -148,7 +155,7 @@ def reproduce(
             bar.write(f"  {experiment.name}: {record['status']} ({how})")
     for experiment in EXPERIMENTS:  # with --only, the report still shows the others' intact cached results
         if experiment.name not in records:
-            cached = _cached(output / ".state" / f"{experiment.name}.json", input_key(experiment, data, quick), output)
+            cached = _cached(experiment, output, data, quick)
             if cached is not None:
                 records[experiment.name] = {**cached, "cached": True}
     records = {e.name: records[e.name] for e in EXPERIMENTS if e.name in records}
@@ -159,7 +166,9 @@ def reproduce(
         "experiments": {
             name: {k: v for k, v in record.items() if k not in ("key", "traceback")} for name, record in records.items()
         },
-        "claims": evaluate_claims({n: r.get("numbers") for n, r in records.items() if r["status"] == "ok"}),
+        "claims": evaluate_claims(
+            {e.name: from_json(e.result_type, records[e.name]["numbers"]) for e in EXPERIMENTS if _ok(records, e)}
+        ),
     }
     common.write_json(output / "results.json", results)
     with atomic_write(output / "index.html", "w") as handle:

@@ -1,14 +1,16 @@
 """The paper's experiments, one module per figure; ``hamsa reproduce`` runs them all into one report.
 
-Every module has ``run(args) -> dict``: ``args`` has ``output`` (a folder), ``data`` (a folder laid out like
-shared/data, or None for built-in shapes) and ``quick`` (smaller sizes). It writes ``<name>.json`` and one or
-more PNGs whose names start with its figure prefix (``fig7_...``) into ``output``, and returns the numbers.
+Every module has ``run(args) -> <Result>``: ``args`` has ``output`` (a folder), ``data`` (a folder laid out
+like shared/data, or None for built-in shapes) and ``quick`` (smaller sizes). It writes ``<name>.json`` and one
+or more PNGs whose names start with its figure prefix (``fig7_...``) into ``output``, and returns its numbers
+as the frozen dataclass its ``run`` is annotated with (:mod:`hamsa.paper.results`).
 Each module also runs on its own: ``python -m hamsa.paper.experiments.fig2_step_potential -o report/``.
 """
 
 from __future__ import annotations
 
 import importlib
+import typing
 from dataclasses import dataclass
 
 
@@ -26,6 +28,11 @@ class Experiment:
 
     def module(self):
         return importlib.import_module(f"{__name__}.{self.name}")
+
+    @property
+    def result_type(self) -> type:
+        """The result dataclass the experiment's ``run`` returns (its return annotation)."""
+        return typing.get_type_hints(self.module().run)["return"]
 
 
 EXPERIMENTS = (

@@ -11,6 +11,7 @@ import numpy as np
 import hamsa
 from hamsa.cache import save_record
 from hamsa.files import atomic_write
+from hamsa.paper.results import to_json
 
 
 def parse_args(description: str, argv=None) -> argparse.Namespace:
@@ -47,20 +48,9 @@ def builtin_humanoid(args, pose: str = "rest") -> hamsa.TriMesh:
     return hamsa.shapes.humanoid(pose, spacing=0.035 if args.quick else 0.02).scaled_to_unit_area()
 
 
-def plain(value):
-    if isinstance(value, dict):
-        return {k: plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return plain(value.tolist())
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
-    return value
-
-
-def write_json(path: Path, numbers: dict) -> None:
-    save_record(path, plain(numbers), indent=2)
+def write_json(path: Path, numbers) -> None:
+    """A result (or plain values) as indented JSON, written atomically."""
+    save_record(path, to_json(numbers), indent=2)
 
 
 class Timer:
@@ -91,11 +81,12 @@ def kim_curve_panel(ax, curves: dict, aucs: dict, title: str, labels: dict | Non
     ax.legend(loc="lower right", fontsize=8)
 
 
-def print_method_scores(figure: str, result: dict, hamiltonian: str = "Hamiltonian") -> None:
-    """One line per matching method of an experiment's result: AUC and mean error, LBO vs Hamiltonian."""
-    for method, by_basis in result["methods"].items():
-        lbo, ham = by_basis["lbo"], by_basis["hamiltonian"]
+def print_method_scores(figure: str, result, hamiltonian: str = "Hamiltonian") -> None:
+    """One line per matching method of a MatchingResult or TextureResult: AUC and mean error, LBO vs
+    Hamiltonian."""
+    for method, scores in result.methods.items():
+        lbo, ham = scores.lbo, scores.hamiltonian
         print(
-            f"{figure} {method} ({result['dataset']}): AUC LBO {lbo['auc']:.3f} vs {hamiltonian} {ham['auc']:.3f}; "
-            f"mean error {lbo['mean_error']:.4f} vs {ham['mean_error']:.4f}"
+            f"{figure} {method} ({result.dataset}): AUC LBO {lbo.auc:.3f} vs {hamiltonian} {ham.auc:.3f}; "
+            f"mean error {lbo.mean_error:.4f} vs {ham.mean_error:.4f}"
         )

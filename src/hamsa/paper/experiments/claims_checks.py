@@ -24,6 +24,7 @@ import hamsa
 from hamsa import shapes
 from hamsa.operators import hamiltonian, stiffness_matrix
 from hamsa.optimize import ReducedRepresentationProblem
+from hamsa.paper.results import BasisChecks, MuRule, SparsityAndCost, TheoremChecks
 from hamsa.theory import critical_potential_scale, eigenvalue_bounds, first_order_eigenvector
 
 from ._common import Timer, parse_args, write_json
@@ -46,10 +47,10 @@ def _mu_rule(mesh, lbo, V, index=3):
         errors.append(abs(E - (lbo.values[index] + mu * expectation)))
     mu = 0.5 * critical_potential_scale(lbo, V, index)
     E_half = hamsa.eigenbasis(mesh, index + 3, mu * V).values[index]
-    return {
-        "error_ratios_halving_mu": [errors[0] / errors[1], errors[1] / errors[2]],
-        "E_at_half_bound_over_mu_maxV": float(E_half / (mu * V.max())),
-    }
+    return MuRule(
+        error_ratios_halving_mu=[float(errors[0] / errors[1]), float(errors[1] / errors[2])],
+        E_at_half_bound_over_mu_maxV=float(E_half / (mu * V.max())),
+    )
 
 
 def _residual_bound(mesh, V, basis, rng):
@@ -84,12 +85,12 @@ def _sparsity_and_cost(mesh, V, k):
             basis = hamsa.eigenbasis(mesh, k, potential, method="krylov")
             samples.append(time.perf_counter() - start)
         times[name], solves[name] = float(np.median(samples)), basis.info.solves
-    return {
-        "nnz_W": int(W.nnz),
-        "nnz_H": int(H.nnz),
-        "solves_ratio_hamiltonian_over_lbo": solves["hamiltonian"] / solves["lbo"],
-        "time_ratio_hamiltonian_over_lbo": times["hamiltonian"] / times["lbo"],
-    }
+    return SparsityAndCost(
+        nnz_W=int(W.nnz),
+        nnz_H=int(H.nnz),
+        solves_ratio_hamiltonian_over_lbo=solves["hamiltonian"] / solves["lbo"],
+        time_ratio_hamiltonian_over_lbo=times["hamiltonian"] / times["lbo"],
+    )
 
 
 def _gradient_check(mesh, rng, k=10, m=60):
@@ -120,7 +121,7 @@ def _perturbation_order(mesh, V, rng, index=2):
     return [errors[1.0] / errors[0.5], errors[0.5] / errors[0.25]]
 
 
-def run(args) -> dict:
+def run(args) -> TheoremChecks:
     timer = Timer()
     rng = np.random.default_rng(0)
     n_around = 24 if args.quick else 40
@@ -132,22 +133,22 @@ def run(args) -> dict:
     small = shapes.capsule(0.5, 2.0, 12).scaled_to_unit_area()
     V_small = rng.random(small.n_vertices) * 50
     gram = basis.vectors.T @ basis.mass @ basis.vectors
-    numbers = {
-        "mesh": f"built-in capsule ({mesh.n_vertices} vertices, unit area)",
-        "T1_max_relative_violation": violation,
-        "T2": _mu_rule(mesh, lbo, np.exp(-((mesh.vertices[:, 2] - 0.3) ** 2) / 0.05)),
-        "T3_max_ratio_lhs_over_bound": residual_ratio,
-        "T4_random_basis_max_ratio": random_ratio,
-        "T5": _sparsity_and_cost(mesh, V, 50),
-        "T8_gradient_relative_error": _gradient_check(small, rng),
-        "T13_error_ratios_halving_eps": _perturbation_order(small, V_small, rng),
-        "T15": {
-            "orthonormality_error": float(np.abs(gram - np.eye(k)).max()),
-            "ascending": bool(np.all(np.diff(basis.values) >= 0)),
-            "E1": float(basis.values[0]),
-        },
-        "seconds": timer(),
-    }
+    numbers = TheoremChecks(
+        mesh=f"built-in capsule ({mesh.n_vertices} vertices, unit area)",
+        T1_max_relative_violation=violation,
+        T2=_mu_rule(mesh, lbo, np.exp(-((mesh.vertices[:, 2] - 0.3) ** 2) / 0.05)),
+        T3_max_ratio_lhs_over_bound=residual_ratio,
+        T4_random_basis_max_ratio=random_ratio,
+        T5=_sparsity_and_cost(mesh, V, 50),
+        T8_gradient_relative_error=_gradient_check(small, rng),
+        T13_error_ratios_halving_eps=_perturbation_order(small, V_small, rng),
+        T15=BasisChecks(
+            orthonormality_error=float(np.abs(gram - np.eye(k)).max()),
+            ascending=bool(np.all(np.diff(basis.values) >= 0)),
+            E1=float(basis.values[0]),
+        ),
+        seconds=timer(),
+    )
     write_json(Path(args.output) / "claims_checks.json", numbers)
     return numbers
 
@@ -155,7 +156,7 @@ def run(args) -> dict:
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print(
-        f"claims: T1 violation {r['T1_max_relative_violation']:.1e}, T3 ratio {r['T3_max_ratio_lhs_over_bound']:.3f}, "
-        f"T8 gradient error {r['T8_gradient_relative_error']:.1e}, T13 ratios {r['T13_error_ratios_halving_eps']} "
-        f"({r['seconds']} s)"
+        f"claims: T1 violation {r.T1_max_relative_violation:.1e}, T3 ratio {r.T3_max_ratio_lhs_over_bound:.3f}, "
+        f"T8 gradient error {r.T8_gradient_relative_error:.1e}, T13 ratios {r.T13_error_ratios_halving_eps} "
+        f"({r.seconds} s)"
     )

@@ -34,6 +34,7 @@ import hamsa
 from hamsa import potentials, shapes
 from hamsa.matching import functional_from_map, offdiagonal_energy
 from hamsa.paper.benchmark import BASES, SCORES, evaluate_pair, summarize
+from hamsa.paper.results import BasisScores, MatchingResult, OffDiagonalEnergy, PairScores, Scores, from_json
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
@@ -64,7 +65,7 @@ def _functional_maps(source, target, lbo, size: int = 30, mu: float = 100.0):
     return functional_from_map(identity, *lbo), functional_from_map(identity, *hamiltonian), V_s
 
 
-def run(args) -> dict:
+def run(args) -> MatchingResult:
     timer = Timer()
     dataset, pairs = _pairs(args)
     k = 60 if args.quick else 100
@@ -74,41 +75,39 @@ def run(args) -> dict:
         identity = np.arange(source.n_vertices)
         scored = evaluate_pair(source, target, identity, k, METHODS, oracle=True)  # the paper's potentials
         records.append(scored)
-        rows += [{"source": source_name, "target": target_name, **row} for row in scored["rows"]]
+        rows += [from_json(PairScores, {"source": source_name, "target": target_name, **row}) for row in scored["rows"]]
         for method, by_basis in scored["curves"].items():
             for basis, curve in by_basis.items():
                 curves[method][basis].append(curve)
-    mean = {m: {} for m in METHODS}
+    by_method = {m: {} for m in METHODS}
     for row in summarize(records, dataset)["rows"]:
-        mean[row["method"]][row["basis"]] = {key: row[key] for key in SCORES}
+        by_method[row["method"]][row["basis"]] = from_json(Scores, {key: row[key] for key in SCORES})
+    mean = {m: BasisScores(**by_basis) for m, by_basis in by_method.items()}
     source, target = pairs[0][2], pairs[0][3]
     fmaps = _functional_maps(source, target, (hamsa.eigenbasis(source, 30), hamsa.eigenbasis(target, 30)))
     C_lbo, C_h, _ = fmaps
-    numbers = {
-        "dataset": dataset,
-        "pairs": [(s, t) for s, t, _, _ in pairs],
-        "k": k,
-        "mu": 1.0,
-        "potentials": "oracle (from the ground truth, as the paper)",
-        "methods": mean,
-        "rows": rows,
-        "offdiagonal_energy": {
-            "lbo": offdiagonal_energy(np.abs(C_lbo)),
-            "hamiltonian": offdiagonal_energy(np.abs(C_h)),
-        },
-        "seconds": None,
-    }
+    energy = OffDiagonalEnergy(lbo=offdiagonal_energy(np.abs(C_lbo)), hamiltonian=offdiagonal_energy(np.abs(C_h)))
     _plot_curves(Path(args.output) / "fig10_matching.png", curves, mean, dataset)
-    _plot_maps(Path(args.output) / "fig10_fmaps.png", C_lbo, C_h, numbers["offdiagonal_energy"], pairs[0][:2])
-    numbers["seconds"] = timer()
-    write_json(Path(args.output) / "fig10_matching.json", numbers)
-    return numbers
+    _plot_maps(Path(args.output) / "fig10_fmaps.png", C_lbo, C_h, energy, pairs[0][:2])
+    result = MatchingResult(
+        dataset=dataset,
+        pairs=[(s, t) for s, t, _, _ in pairs],
+        k=k,
+        mu=1.0,
+        potentials="oracle (from the ground truth, as the paper)",
+        methods=mean,
+        rows=rows,
+        offdiagonal_energy=energy,
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig10_matching.json", result)
+    return result
 
 
 def _plot_curves(path, curves, mean, dataset):
     figure, axes = plt.subplots(1, len(METHODS), figsize=(4.2 * len(METHODS), 3.6), sharey=True)
     for ax, method in zip(axes, METHODS):
-        aucs = {basis: mean[method][basis]["auc"] for basis in BASES}
+        aucs = {basis: getattr(mean[method], basis).auc for basis in BASES}
         kim_curve_panel(ax, curves[method], aucs, f"{method} — {dataset}\n(oracle potentials, as the paper)")
     axes[0].set_ylabel("% correspondences")
     figure.tight_layout()
@@ -120,8 +119,8 @@ def _plot_maps(path, C_lbo, C_h, energy, names):
     figure, axes = plt.subplots(1, 2, figsize=(8, 4))
     for ax, C, title in zip(axes, (C_lbo, C_h), ("LBO", "Hamiltonian, area-distortion V")):
         image = ax.imshow(np.abs(C), cmap="viridis", vmin=0, vmax=1)
-        key = "lbo" if title == "LBO" else "hamiltonian"
-        ax.set_title(f"|C| {title}\noff-diagonal energy {energy[key]:.3f}", fontsize=10)
+        value = energy.lbo if title == "LBO" else energy.hamiltonian
+        ax.set_title(f"|C| {title}\noff-diagonal energy {value:.3f}", fontsize=10)
     figure.colorbar(image, ax=axes, shrink=0.8)
     figure.suptitle(f"ground-truth functional map {names[0]} → {names[1]}", fontsize=10)
     save_figure(figure, path)
@@ -131,5 +130,5 @@ def _plot_maps(path, C_lbo, C_h, energy, names):
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print_method_scores("fig10", r)
-    e = r["offdiagonal_energy"]
-    print(f"fig10 |C| off-diagonal energy: LBO {e['lbo']:.3f} vs Hamiltonian {e['hamiltonian']:.3f} ({r['seconds']} s)")
+    e = r.offdiagonal_energy
+    print(f"fig10 |C| off-diagonal energy: LBO {e.lbo:.3f} vs Hamiltonian {e.hamiltonian:.3f} ({r.seconds} s)")

@@ -24,7 +24,8 @@ import hamsa
 from hamsa import potentials, shapes, viz
 from hamsa.datasets import load_tosca
 from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
-from hamsa.paper.benchmark import TEXTURE_MU, carried_to_target, identity_truth, match_pair
+from hamsa.paper.benchmark import SCORES, TEXTURE_MU, carried_to_target, identity_truth, match_pair
+from hamsa.paper.results import BasisScores, PairScores, Scores, TextureResult, from_json, to_json
 
 from ._common import Timer, data_file, kim_curve_panel, parse_args, print_method_scores, save_figure, write_json
 
@@ -55,7 +56,7 @@ def _pairs(args):
     return "built-in humanoid poses", pairs
 
 
-def run(args) -> dict:
+def run(args) -> TextureResult:
     timer = Timer()
     dataset, pairs = _pairs(args)
     k = 60 if args.quick else 100
@@ -77,27 +78,29 @@ def run(args) -> dict:
         for method in METHODS:
             for basis, pair in bases.items():
                 errors = distances.errors(match_pair(method, *pair)[points])
-                rows.append({"source": source_name, "target": target_name, "method": method, "basis": basis})
-                rows[-1].update(summary(errors))
+                named = {"source": source_name, "target": target_name, "method": method, "basis": basis}
+                rows.append(from_json(PairScores, {**named, **summary(errors)}))
                 curves[method][basis].append(error_curve(errors))
-    mean = {
-        m: {b: {key: float(np.mean([r[key] for r in rows if r["method"] == m and r["basis"] == b])) for key in
-                ("auc", "mean_error", "within_0.05")} for b in ("lbo", "hamiltonian")}
-        for m in METHODS
-    }  # fmt: skip
-    numbers = {
-        "dataset": dataset,
-        "pairs": [(p[0], p[1]) for p in pairs],
-        "k": k,
-        "mu": MU,
-        "spot_area_fraction": float(np.sum(source.face_areas[np.all(luminance[source.faces] < 0.5, axis=1)])),
-        "methods": mean,
-        "rows": rows,
-    }
+    mean = {m: BasisScores(**{b: _mean_scores(rows, m, b) for b in ("lbo", "hamiltonian")}) for m in METHODS}
     _plot(Path(args.output) / "fig11_dalmatian.png", source, luminance, curves, mean, dataset)
-    numbers["seconds"] = timer()
-    write_json(Path(args.output) / "fig11_dalmatian.json", numbers)
-    return numbers
+    result = TextureResult(
+        dataset=dataset,
+        pairs=[(p[0], p[1]) for p in pairs],
+        k=k,
+        mu=MU,
+        spot_area_fraction=float(np.sum(source.face_areas[np.all(luminance[source.faces] < 0.5, axis=1)])),
+        methods=mean,
+        rows=rows,
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig11_dalmatian.json", result)
+    return result
+
+
+def _mean_scores(rows: list[PairScores], method: str, basis: str) -> Scores:
+    """The mean of each score over the pairs of one method and basis."""
+    mine = [to_json(r) for r in rows if r.method == method and r.basis == basis]
+    return from_json(Scores, {key: float(np.mean([r[key] for r in mine])) for key in SCORES})
 
 
 def _plot(path, source, luminance, curves, mean, dataset):
@@ -113,7 +116,7 @@ def _plot(path, source, luminance, curves, mean, dataset):
     axes[0].set_axis_off()
     axes[0].set_title(f"synthetic dalmatian coat, V = {MU:g} x luminance", fontsize=10)
     for ax, method in zip(axes[1:], METHODS):
-        aucs = {basis: mean[method][basis]["auc"] for basis in ("lbo", "hamiltonian")}
+        aucs = {basis: getattr(mean[method], basis).auc for basis in ("lbo", "hamiltonian")}
         labels = {"lbo": "LBO", "hamiltonian": "texture Hamiltonian"}
         kim_curve_panel(ax, curves[method], aucs, f"{method} — {dataset}", labels)
     axes[1].set_ylabel("% correspondences")
@@ -125,4 +128,4 @@ def _plot(path, source, luminance, curves, mean, dataset):
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print_method_scores("fig11", r, "texture Hamiltonian")
-    print(f"fig11: {r['seconds']} s")
+    print(f"fig11: {r.seconds} s")

@@ -22,6 +22,7 @@ from scipy.special import eval_hermite, factorial
 
 from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
+from hamsa.paper.results import HarmonicsResult, Spectrum1D
 
 from ._common import Timer, parse_args, save_figure, write_json
 
@@ -69,7 +70,7 @@ def solve(V: np.ndarray, W, A, count: int):
     return values, vectors
 
 
-def run(args) -> dict:
+def run(args) -> HarmonicsResult:
     timer = Timer()
     n = 400 if args.quick else 2000
     count = 6
@@ -108,7 +109,7 @@ def run(args) -> dict:
         "step": f"finite step (V0 = {depth:g})",
         "oscillator": f"oscillator (w = {omega:g})",
     }
-    numbers = {"grid_points": n}
+    spectra = {}
     for axis, (name, case) in zip(axes, cases.items()):
         scale = 0.35 * (case["values"][1] - case["values"][0])
         axis.plot(x, np.minimum(case["V"], case["values"][-1] * 1.3), color="0.6", lw=2, label="V")
@@ -130,18 +131,22 @@ def run(args) -> dict:
         axis.set_xlabel("x")
         axis.set_ylabel("E  (psi offset by its eigenvalue)")
         errors = np.abs(case["values"] - case["exact"]) / case["exact"]
-        numbers[name] = {"numeric": case["values"], "analytic": case["exact"], "relative_error": errors}
+        spectra[name] = Spectrum1D(numeric=case["values"], analytic=case["exact"], relative_error=errors)
     figure.suptitle("Fig. 1 - 1-D harmonics: FEM (lines) vs analytic (dots; dotted lines = analytic E_n)")
     figure.tight_layout()
     png = Path(args.output) / "fig1_harmonics_1d.png"
     save_figure(figure, png)
     plt.close(figure)
-    numbers["max_relative_error"] = max(float(np.max(numbers[c]["relative_error"])) for c in cases)
-    numbers["seconds"] = timer()
-    write_json(Path(args.output) / "fig1_harmonics_1d.json", numbers)
-    return numbers
+    result = HarmonicsResult(
+        grid_points=n,
+        **spectra,
+        max_relative_error=max(float(np.max(s.relative_error)) for s in spectra.values()),
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig1_harmonics_1d.json", result)
+    return result
 
 
 if __name__ == "__main__":
     result = run(parse_args(__doc__))
-    print(f"fig1: max relative eigenvalue error vs analytic {result['max_relative_error']:.2e} ({result['seconds']} s)")
+    print(f"fig1: max relative eigenvalue error vs analytic {result.max_relative_error:.2e} ({result.seconds} s)")

@@ -15,12 +15,13 @@ import numpy as np
 
 import hamsa
 from hamsa import potentials, viz
+from hamsa.paper.results import StepPotentialResult
 from hamsa.theory import eigenvalue_bounds, mass_fraction
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 
-def run(args) -> dict:
+def run(args) -> StepPotentialResult:
     timer = Timer()
     mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/michael0.off.gz")
     view = "auto" if from_data else "xz"
@@ -47,30 +48,29 @@ def run(args) -> dict:
         panel_size=(240, 300),
         zoom=0.9,
     )
-    numbers = {
-        "mesh": name,
-        "n_vertices": mesh.n_vertices,
-        "V0": height,
-        "area_fraction_V0": float(basis.mass.diagonal()[region].sum()),
-        "lbo_values": lbo.values[:count],
-        "values": basis.values,
-        "theorem1_lower": lower,
-        "theorem1_upper": upper,
-        "theorem1_holds": bool(
+    result = StepPotentialResult(
+        mesh=name,
+        n_vertices=mesh.n_vertices,
+        V0=height,
+        area_fraction_V0=float(basis.mass.diagonal()[region].sum()),
+        lbo_values=lbo.values[:count],
+        values=basis.values,
+        theorem1_lower=lower,
+        theorem1_upper=upper,
+        theorem1_holds=bool(
             np.all((lower - 1e-8 * upper.max() <= basis.values) & (basis.values <= upper * (1 + 1e-8)))
         ),
-        "lbo_mass_in_V0_free_region": inside_lbo,
-        "mass_in_V0_free_region": inside,
-        "trapped_mean_mass": float(inside[basis.values < height].mean()) if np.any(basis.values < height) else None,
-        "seconds": timer(),
-    }
-    write_json(Path(args.output) / "fig2_step_potential.json", numbers)
-    return numbers
+        lbo_mass_in_V0_free_region=inside_lbo,
+        mass_in_V0_free_region=inside,
+        trapped_mean_mass=float(inside[basis.values < height].mean()) if np.any(basis.values < height) else None,
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig2_step_potential.json", result)
+    return result
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print(
-        f"fig2 ({r['mesh']}): modes below V0 keep {100 * r['trapped_mean_mass']:.1f}% of their mass in V = 0 "
-        f"({r['seconds']} s)"
+        f"fig2 ({r.mesh}): modes below V0 keep {100 * r.trapped_mean_mass:.1f}% of their mass in V = 0 ({r.seconds} s)"
     )

@@ -18,11 +18,12 @@ import hamsa
 from hamsa import viz
 from hamsa.diffusion import heat_kernel, total_heat
 from hamsa.geodesic import geodesic_distance
+from hamsa.paper.results import DiffusionResult, HeatAtTime
 
 from ._common import Timer, builtin_humanoid, data_file, parse_args, write_json
 
 
-def run(args) -> dict:
+def run(args) -> DiffusionResult:
     timer = Timer()
     path = data_file(args.data, "tosca_hires/meshes/centaur0.off.gz")
     landmarks = data_file(args.data, "tosca_hires/kim_landmarks/centaur.pid")
@@ -53,12 +54,12 @@ def run(args) -> dict:
             titles.append(f"{label} t={t:.2g}")
             weights = np.maximum(ut, 0) * b.mass.diagonal()
             rows.append(
-                {
-                    "operator": label,
-                    "t": t,
-                    "total_heat": h,
-                    "mean_distance_to_leg": float(weights @ distance_to_leg / weights.sum()),
-                }
+                HeatAtTime(
+                    operator=label,
+                    t=float(t),
+                    total_heat=float(h),
+                    mean_distance_to_leg=float(weights @ distance_to_leg / weights.sum()),
+                )
             )
     fields.append(V)
     titles.append("potential V")
@@ -72,25 +73,25 @@ def run(args) -> dict:
         view=view,
         panel_size=(300, 300),
     )
-    numbers = {
-        "mesh": name,
-        "n_vertices": mesh.n_vertices,
-        "k": k,
-        "mu": mu,
-        "source_vertex": head,
-        "leg_vertex": leg,
-        "times": times,
-        "rows": rows,
-        "seconds": timer(),
-    }
-    write_json(Path(args.output) / "fig3_diffusion.json", numbers)
-    return numbers
+    result = DiffusionResult(
+        mesh=name,
+        n_vertices=mesh.n_vertices,
+        k=k,
+        mu=mu,
+        source_vertex=head,
+        leg_vertex=leg,
+        times=times,
+        rows=rows,
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig3_diffusion.json", result)
+    return result
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    last = [row for row in r["rows"] if row["t"] == r["times"][-1]]
+    last = [row for row in r.rows if row.t == r.times[-1]]
     print(
-        f"fig3 ({r['mesh']}): at the last time the heat's mean distance to the leg is "
-        f"{last[0]['mean_distance_to_leg']:.3f} (LBO) vs {last[1]['mean_distance_to_leg']:.3f} (H) ({r['seconds']} s)"
+        f"fig3 ({r.mesh}): at the last time the heat's mean distance to the leg is "
+        f"{last[0].mean_distance_to_leg:.3f} (LBO) vs {last[1].mean_distance_to_leg:.3f} (H) ({r.seconds} s)"
     )

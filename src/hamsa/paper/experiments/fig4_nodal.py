@@ -17,11 +17,12 @@ import hamsa
 from hamsa import potentials, viz
 from hamsa.geodesic import geodesic_distance
 from hamsa.nodal import courant_check, nodal_domains
+from hamsa.paper.results import NodalCount, NodalResult
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 
-def run(args) -> dict:
+def run(args) -> NodalResult:
     timer = Timer()
     mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/dog0.off.gz")
     view = "auto" if from_data else "xz"
@@ -34,17 +35,17 @@ def run(args) -> dict:
         "geodesic": scale * geodesic_distance(mesh, [tip], normalize=True),
     }
     shown = [3, 4, 5, 6]
-    fields, titles, numbers = [], [], {"mesh": name, "n_vertices": mesh.n_vertices, "scale": scale, "operators": {}}
+    fields, titles, counts = [], [], {}
     for label, V in operators.items():
         basis = lbo if V is None else hamsa.eigenbasis(mesh, 20, V)
         rows = courant_check(mesh, basis)
-        numbers["operators"][label] = {
-            "values": basis.values,
-            "domains": [r["domains"] for r in rows],
-            "bounds": [r["bound"] for r in rows],
-            "courant_holds": all(r["holds"] for r in rows),
-            "violations": [r["index"] for r in rows if not r["holds"]],
-        }
+        counts[label] = NodalCount(
+            values=basis.values,
+            domains=[int(r["domains"]) for r in rows],
+            bounds=[int(r["bound"]) for r in rows],
+            courant_holds=all(r["holds"] for r in rows),
+            violations=[int(r["index"]) for r in rows if not r["holds"]],
+        )
         for i in shown:
             count, _ = nodal_domains(mesh, basis.vectors[:, i])
             fields.append(basis.vectors[:, i])  # the nodal lines are the white curves between red and blue
@@ -60,15 +61,14 @@ def run(args) -> dict:
         view=view,
         panel_size=(260, 300),
     )
-    numbers["seconds"] = timer()
-    write_json(Path(args.output) / "fig4_nodal.json", numbers)
-    return numbers
+    result = NodalResult(mesh=name, n_vertices=mesh.n_vertices, scale=scale, operators=counts, seconds=timer())
+    write_json(Path(args.output) / "fig4_nodal.json", result)
+    return result
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     summary = ", ".join(
-        f"{k}: {'holds' if v['courant_holds'] else 'violated at ' + str(v['violations'])}"
-        for k, v in r["operators"].items()
+        f"{k}: {'holds' if v.courant_holds else 'violated at ' + str(v.violations)}" for k, v in r.operators.items()
     )
-    print(f"fig4 ({r['mesh']}): Courant over 20 eigenfunctions - {summary} ({r['seconds']} s)")
+    print(f"fig4 ({r.mesh}): Courant over 20 eigenfunctions - {summary} ({r.seconds} s)")

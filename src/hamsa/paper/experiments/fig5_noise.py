@@ -18,11 +18,12 @@ import hamsa
 from hamsa import viz
 from hamsa.geodesic import geodesic_distance
 from hamsa.noise import basis_stability, potential_noise, topological_noise, vertex_noise
+from hamsa.paper.results import NoiseCase, NoiseResult
 
 from ._common import Timer, dataset_or_builtin, parse_args, write_json
 
 
-def run(args) -> dict:
+def run(args) -> NoiseResult:
     timer = Timer()
     mesh, name, from_data = dataset_or_builtin(args, "tosca_hires/meshes/michael1.off.gz")
     view = "auto" if from_data else "xz"
@@ -41,7 +42,7 @@ def run(args) -> dict:
         "potential noise": (mesh, potential_noise(V, 0.2, seed=3), None),
         "30% holes": (holed, V[kept], kept),
     }
-    numbers = {"mesh": name, "n_vertices": mesh.n_vertices, "mu": mu, "cases": {}}
+    stability = {}
     shown = [1, 2, 3]
     meshes, fields, titles = [], [], []
     for i in shown:
@@ -51,10 +52,13 @@ def run(args) -> dict:
     for label, (m, potential, index) in cases.items():
         perturbed = hamsa.eigenbasis(m, k, potential)
         perturbed_lbo = hamsa.eigenbasis(m, k) if label != "potential noise" else lbo
-        numbers["cases"][label] = {
-            "hamiltonian_stability": basis_stability(clean, perturbed, index),
-            "lbo_stability": basis_stability(lbo, perturbed_lbo, index),
-        }
+        hamiltonian, plain_lbo = basis_stability(clean, perturbed, index), basis_stability(lbo, perturbed_lbo, index)
+        stability[label] = NoiseCase(
+            hamiltonian_stability=hamiltonian,
+            lbo_stability=plain_lbo,
+            hamiltonian_mean_first5=float(np.mean(hamiltonian[:5])),
+            lbo_mean_first5=float(np.mean(plain_lbo[:5])),
+        )
         reference = clean.vectors if index is None else clean.vectors[index]
         for i in shown:
             vector = perturbed.vectors[:, i]
@@ -62,9 +66,6 @@ def run(args) -> dict:
             meshes.append(m)
             fields.append(vector * np.sign(vector @ (weights * reference[:, i]) or 1.0))
             titles.append(f"{label} psi{i + 1}")
-    for label, case in numbers["cases"].items():
-        case["hamiltonian_mean_first5"] = float(np.mean(case["hamiltonian_stability"][:5]))
-        case["lbo_mean_first5"] = float(np.mean(case["lbo_stability"][:5]))
     viz.render_fields(
         meshes,
         fields,
@@ -76,14 +77,14 @@ def run(args) -> dict:
         view=view,
         panel_size=(240, 300),
     )
-    numbers["seconds"] = timer()
-    write_json(Path(args.output) / "fig5_noise.json", numbers)
-    return numbers
+    result = NoiseResult(mesh=name, n_vertices=mesh.n_vertices, mu=mu, cases=stability, seconds=timer())
+    write_json(Path(args.output) / "fig5_noise.json", result)
+    return result
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     summary = ", ".join(
-        f"{k}: H {v['hamiltonian_mean_first5']:.3f} / LBO {v['lbo_mean_first5']:.3f}" for k, v in r["cases"].items()
+        f"{k}: H {v.hamiltonian_mean_first5:.3f} / LBO {v.lbo_mean_first5:.3f}" for k, v in r.cases.items()
     )
-    print(f"fig5 ({r['mesh']}): mean stability of the first 5 modes - {summary} ({r['seconds']} s)")
+    print(f"fig5 ({r.mesh}): mean stability of the first 5 modes - {summary} ({r.seconds} s)")

@@ -20,18 +20,19 @@ import scipy.sparse as sp
 from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
 from hamsa.optimize import optimize_potential
+from hamsa.paper.results import Optimize1DResult, OptimizedPotential1D
 
 from ._common import Timer, parse_args, save_figure, write_json
 
 
-def run(args) -> dict:
+def run(args) -> Optimize1DResult:
     timer = Timer()
     n, k = 200, 15
     W, A, x = interval_operators(n)
     f = x.copy()
     identity = sp.identity(n, format="csr")
     iterations = 80 if args.quick else 300
-    numbers = {"grid_points": n, "k": k, "parametrizations": {}}
+    optimized = {}
     figure, axes = plt.subplots(1, 3, figsize=(14, 4))
     _, lbo, _ = generalized_eigsh(W, identity, k, method="dense")
     axes[1].plot(x, f, "k", lw=2, label="f(x) = x")
@@ -46,16 +47,16 @@ def run(args) -> dict:
         axes[0].plot(x, V, label=f"V ({name})")
         axes[1].plot(x, psi @ (psi.T @ f), "--", label=f"Hamiltonian ({name})")
         axes[2].semilogy([h["iteration"] for h in result.history], [h["loss"] for h in result.history], label=name)
-        numbers["parametrizations"][name] = {
-            "loss": result.loss,
-            "lbo_loss": result.lbo_loss,
-            "ratio": result.ratio,
-            "mean_V_near_ends": float(V[edge].mean()),
-            "mean_V_interior": float(V[~edge].mean()),
-            "argmax_x": float(x[np.argmax(V)]),
-            "argmin_x": float(x[np.argmin(V)]),
-            "high_near_boundary": bool(V[edge].mean() > V[~edge].mean()),
-        }
+        optimized[name] = OptimizedPotential1D(
+            loss=result.loss,
+            lbo_loss=result.lbo_loss,
+            ratio=result.ratio,
+            mean_V_near_ends=float(V[edge].mean()),
+            mean_V_interior=float(V[~edge].mean()),
+            argmax_x=float(x[np.argmax(V)]),
+            argmin_x=float(x[np.argmin(V)]),
+            high_near_boundary=bool(V[edge].mean() > V[~edge].mean()),
+        )
     axes[0].set_title("optimized potential")
     axes[1].set_title("reconstruction of f")
     axes[2].set_title("loss (reduced problem) per L-BFGS iteration")
@@ -65,15 +66,15 @@ def run(args) -> dict:
     figure.tight_layout()
     save_figure(figure, Path(args.output) / "fig6_optimize_1d.png")
     plt.close(figure)
-    numbers["seconds"] = timer()
+    numbers = Optimize1DResult(grid_points=n, k=k, parametrizations=optimized, seconds=timer())
     write_json(Path(args.output) / "fig6_optimize_1d.json", numbers)
     return numbers
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    for name, p in r["parametrizations"].items():
+    for name, p in r.parametrizations.items():
         print(
-            f"fig6 ({name}): loss {p['loss']:.3e} vs LBO {p['lbo_loss']:.3e} ({p['ratio']:.1f}x); V near the ends "
-            f"{p['mean_V_near_ends']:.3g}, interior {p['mean_V_interior']:.3g}"
+            f"fig6 ({name}): loss {p.loss:.3e} vs LBO {p.lbo_loss:.3e} ({p.ratio:.1f}x); V near the ends "
+            f"{p.mean_V_near_ends:.3g}, interior {p.mean_V_interior:.3g}"
         )

@@ -17,11 +17,12 @@ import numpy as np
 import hamsa
 from hamsa import shapes, viz
 from hamsa.optimize import optimize_potential
+from hamsa.paper.results import OptimizeHandResult, ReconstructionErrors
 
 from ._common import Timer, data_file, parse_args, write_json
 
 
-def run(args) -> dict:
+def run(args) -> OptimizeHandResult:
     timer = Timer()
     path = data_file(args.data, "classic/hand_6k.off")
     if path and not args.quick:
@@ -58,22 +59,22 @@ def run(args) -> dict:
         panel_size=(380, 380),
     )
     fingers = V < np.percentile(V, 10)
-    numbers = {
-        "mesh": name,
-        "n_vertices": mesh.n_vertices,
-        "k": k,
-        "m": m,
-        "iterations": len(result.history) - 1,
-        "lbo_error": result.lbo_loss,
-        "hamiltonian_error": result.loss,
-        "ratio": result.ratio,
-        "paper": {"lbo_error": 0.0015, "hamiltonian_error": 0.00061, "ratio": 0.0015 / 0.00061},
-        "V_min": float(V.min()),
-        "V_max": float(V.max()),
-        "mean_lbo_error_where_V_lowest_10pct": float(error_lbo[fingers].mean()),
-        "mean_lbo_error_elsewhere": float(error_lbo[~fingers].mean()),
-        "seconds": timer(),
-    }
+    numbers = OptimizeHandResult(
+        mesh=name,
+        n_vertices=mesh.n_vertices,
+        k=k,
+        m=m,
+        iterations=len(result.history) - 1,
+        lbo_error=result.lbo_loss,
+        hamiltonian_error=result.loss,
+        ratio=result.ratio,
+        paper=ReconstructionErrors(lbo_error=0.0015, hamiltonian_error=0.00061, ratio=0.0015 / 0.00061),
+        V_min=float(V.min()),
+        V_max=float(V.max()),
+        mean_lbo_error_where_V_lowest_10pct=float(error_lbo[fingers].mean()),
+        mean_lbo_error_elsewhere=float(error_lbo[~fingers].mean()),
+        seconds=timer(),
+    )
     write_json(Path(args.output) / "fig7_optimize_hand.json", numbers)
     return numbers
 
@@ -81,6 +82,6 @@ def run(args) -> dict:
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print(
-        f"fig7 ({r['mesh']}): error LBO {r['lbo_error']:.3g} vs optimized Hamiltonian {r['hamiltonian_error']:.3g} "
-        f"({r['ratio']:.2f}x; paper 2.46x) in {r['seconds']} s"
+        f"fig7 ({r.mesh}): error LBO {r.lbo_error:.3g} vs optimized Hamiltonian {r.hamiltonian_error:.3g} "
+        f"({r.ratio:.2f}x; paper 2.46x) in {r.seconds} s"
     )

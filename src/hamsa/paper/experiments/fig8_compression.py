@@ -21,6 +21,7 @@ import scipy.sparse as sp
 import hamsa
 from hamsa import compression, shapes
 from hamsa.optimize import optimize_potential
+from hamsa.paper.results import CompressionPoint, CompressionResult
 
 from ._common import Timer, data_file, parse_args, save_figure, write_json
 
@@ -28,7 +29,7 @@ METHODS = ("mhb", "hamiltonian", "hamiltonian-opt")
 LABELS = {"mhb": "MHB", "hamiltonian": "H (alpha i + beta)", "hamiltonian-opt": "H opt (V not counted)"}
 
 
-def run(args) -> dict:
+def run(args) -> CompressionResult:
     timer = Timer()
     path = data_file(args.data, "classic/fandisk.obj")
     if path and not args.quick:
@@ -54,22 +55,22 @@ def run(args) -> dict:
             decoded = compression.decode(data, mesh.faces)
             size = compression.sizes(data)
             rows.append(
-                {
-                    "method": method,
-                    "coefficients": count,
-                    "bits": bits,
-                    "bpv": size.bits_per_vertex,
-                    "permutation_bpv": size.permutation_bits / n,
-                    "kg_error": compression.karni_gotsman_error(mesh, decoded),
-                    "rms_error": compression.rms_error(mesh, decoded),
-                    "representation_gain": optimized.ratio,
-                }
+                CompressionPoint(
+                    method=method,
+                    coefficients=count,
+                    bits=bits,
+                    bpv=size.bits_per_vertex,
+                    permutation_bpv=size.permutation_bits / n,
+                    kg_error=compression.karni_gotsman_error(mesh, decoded),
+                    rms_error=compression.rms_error(mesh, decoded),
+                    representation_gain=optimized.ratio,
+                )
             )
     figure, axes = plt.subplots(1, 2, figsize=(11, 4))
     for method in METHODS:
-        mine = [r for r in rows if r["method"] == method]
+        mine = [r for r in rows if r.method == method]
         for axis, key in zip(axes, ("kg_error", "rms_error")):
-            axis.loglog([r["bpv"] for r in mine], [r[key] for r in mine], "o-", label=LABELS[method])
+            axis.loglog([r.bpv for r in mine], [getattr(r, key) for r in mine], "o-", label=LABELS[method])
     axes[0].set_ylabel("Karni-Gotsman error")
     axes[1].set_ylabel("RMS error / bbox diagonal")
     for axis in axes:
@@ -82,23 +83,23 @@ def run(args) -> dict:
     plt.close(figure)
     ordering = []
     for count in counts:
-        error = {r["method"]: r["kg_error"] for r in rows if r["coefficients"] == count}
+        error = {r.method: r.kg_error for r in rows if r.coefficients == count}
         ordering.append(bool(error["hamiltonian-opt"] <= error["hamiltonian"] <= error["mhb"]))
-    numbers = {
-        "mesh": name,
-        "n_vertices": n,
-        "rows": rows,
-        "ordering_holds_per_count": ordering,
-        "ordering_holds": all(ordering),
-        "seconds": timer(),
-    }
-    write_json(Path(args.output) / "fig8_compression.json", numbers)
-    return numbers
+    result = CompressionResult(
+        mesh=name,
+        n_vertices=n,
+        rows=rows,
+        ordering_holds_per_count=ordering,
+        ordering_holds=all(ordering),
+        seconds=timer(),
+    )
+    write_json(Path(args.output) / "fig8_compression.json", result)
+    return result
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
     print(
-        f"fig8 ({r['mesh']}): error(H opt) <= error(H) <= error(MHB) at equal coefficients: "
-        f"{r['ordering_holds_per_count']} ({r['seconds']} s)"
+        f"fig8 ({r.mesh}): error(H opt) <= error(H) <= error(MHB) at equal coefficients: "
+        f"{r.ordering_holds_per_count} ({r.seconds} s)"
     )

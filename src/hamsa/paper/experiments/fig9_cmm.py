@@ -26,11 +26,12 @@ import hamsa
 from hamsa import shapes, viz
 from hamsa.cmm import compressed_modes
 from hamsa.noise import refine_region
+from hamsa.paper.results import ModesAgreement, ModesRatio, ModesResult, ModesRun
 
 from ._common import Timer, data_file, parse_args, save_figure, write_json
 
 
-def run(args) -> dict:
+def run(args) -> ModesResult:
     timer = Timer()
     meshes = [
         ("capsule", shapes.capsule(0.5, 3.0, n).scaled_to_unit_area())
@@ -56,18 +57,18 @@ def run(args) -> dict:
                         result = compressed_modes(mesh, K, mu, method=method)
                     times.append(time.perf_counter() - start)
                 rows.append(
-                    {
-                        "mesh": name,
-                        "n_vertices": mesh.n_vertices,
-                        "K": K,
-                        "mu": mu,
-                        "method": method,
-                        "seconds_mean": float(np.mean(times)),
-                        "seconds_std": float(np.std(times)),
-                        "runs": len(times),
-                        "objective": result.objective,
-                        "orthogonality_error": result.orthogonality_error,
-                    }
+                    ModesRun(
+                        mesh=name,
+                        n_vertices=mesh.n_vertices,
+                        K=K,
+                        mu=mu,
+                        method=method,
+                        seconds_mean=float(np.mean(times)),
+                        seconds_std=float(np.std(times)),
+                        runs=len(times),
+                        objective=result.objective,
+                        orthogonality_error=result.orthogonality_error,
+                    )
                 )
                 if method == "hamiltonian" and K == counts[name][0]:
                     shown_mesh, shown = mesh, result
@@ -85,29 +86,27 @@ def run(args) -> dict:
     ratios = {}
     for name, mesh in meshes:
         for K in counts[name]:
-            by = {
-                r["method"]: r for r in rows if r["mesh"] == name and r["n_vertices"] == mesh.n_vertices and r["K"] == K
-            }
-            ratios[f"{name}-{mesh.n_vertices}-K{K}"] = {
-                "time_admm_over_hamiltonian": by["admm"]["seconds_mean"] / by["hamiltonian"]["seconds_mean"],
-                "objective_hamiltonian_over_admm": by["hamiltonian"]["objective"] / by["admm"]["objective"],
-            }
+            by = {r.method: r for r in rows if r.mesh == name and r.n_vertices == mesh.n_vertices and r.K == K}
+            ratios[f"{name}-{mesh.n_vertices}-K{K}"] = ModesRatio(
+                time_admm_over_hamiltonian=by["admm"].seconds_mean / by["hamiltonian"].seconds_mean,
+                objective_hamiltonian_over_admm=by["hamiltonian"].objective / by["admm"].objective,
+            )
     discretization = _discretization(args, Path(args.output) / "fig9_cmm_discretization.png")
-    numbers = {"rows": rows, "ratios": ratios, "discretization": discretization, "seconds": timer()}
-    write_json(Path(args.output) / "fig9_cmm.json", numbers)
-    return numbers
+    result = ModesResult(rows=rows, ratios=ratios, discretization=discretization, seconds=timer())
+    write_json(Path(args.output) / "fig9_cmm.json", result)
+    return result
 
 
 def _plot_runtime(path, rows, mu):
     figure, axis = plt.subplots(figsize=(6.4, 4.2))
-    groups = sorted({(r["mesh"].split("_")[0], r["K"]) for r in rows})
+    groups = sorted({(r.mesh.split("_")[0], r.K) for r in rows})
     for method, color in (("hamiltonian", "tab:blue"), ("admm", "tab:orange")):
         for (family, K), marker in zip(groups, "os^Dv<>"):
-            mine = [r for r in rows if r["method"] == method and r["mesh"].split("_")[0] == family and r["K"] == K]
+            mine = [r for r in rows if r.method == method and r.mesh.split("_")[0] == family and r.K == K]
             axis.errorbar(
-                [r["n_vertices"] for r in mine],
-                [r["seconds_mean"] for r in mine],
-                yerr=[r["seconds_std"] for r in mine],
+                [r.n_vertices for r in mine],
+                [r.seconds_mean for r in mine],
+                yerr=[r.seconds_std for r in mine],
                 fmt=marker + ("-" if method == "hamiltonian" else "--"),
                 color=color,
                 capsize=3,
@@ -124,7 +123,7 @@ def _plot_runtime(path, rows, mu):
     plt.close(figure)
 
 
-def _discretization(args, path) -> dict:
+def _discretization(args, path) -> ModesAgreement:
     """Modes of a capsule and of the same surface refined on its x > 0 half (:func:`hamsa.noise.refine_region`):
     for each mode of the first, the largest |<phi, phi'>_A| with a mode of the second (on the shared
     vertices), for the consistent (area-weighted) and the plain vector L1 norm, both methods."""
@@ -158,13 +157,13 @@ def _discretization(args, path) -> dict:
     figure.tight_layout()
     save_figure(figure, path)
     plt.close(figure)
-    return {"n_vertices": [mesh.n_vertices, refined.n_vertices], "K": K, "mu": mu, "agreement": agreement}
+    return ModesAgreement(n_vertices=[mesh.n_vertices, refined.n_vertices], K=K, mu=mu, agreement=agreement)
 
 
 if __name__ == "__main__":
     r = run(parse_args(__doc__))
-    for key, value in r["ratios"].items():
+    for key, value in r.ratios.items():
         print(
-            f"fig9 {key}: time admm / hamiltonian {value['time_admm_over_hamiltonian']:.2f}, "
-            f"objective hamiltonian / admm {value['objective_hamiltonian_over_admm']:.3f}"
+            f"fig9 {key}: time admm / hamiltonian {value.time_admm_over_hamiltonian:.2f}, "
+            f"objective hamiltonian / admm {value.objective_hamiltonian_over_admm:.3f}"
         )
