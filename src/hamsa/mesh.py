@@ -26,7 +26,8 @@ _DEGENERATE_AREA_RATIO = 1e-12
 _LARGEST_COORDINATE = 1e60
 
 
-def _first(indices: np.ndarray, limit: int = 5) -> str:
+def format_ids(indices: np.ndarray, limit: int = 5) -> str:
+    """The first ``limit`` ids of ``indices`` for an error message ("3, 8, 12, ..." when there are more)."""
     shown = ", ".join(str(int(i)) for i in indices[:limit])
     return shown + (", ..." if len(indices) > limit else "")
 
@@ -281,7 +282,7 @@ class TriMesh:
         if len(self.unreferenced_vertices):
             raise MeshError(
                 f"mesh has {len(self.unreferenced_vertices)} unreferenced vertices "
-                f"({_first(self.unreferenced_vertices)}); they carry no area and make the mass "
+                f"({format_ids(self.unreferenced_vertices)}); they carry no area and make the mass "
                 "matrix singular: use mesh.without_unreferenced() and keep its index map"
             )
 
@@ -382,7 +383,7 @@ def check_coordinates(points: np.ndarray, what: str = "vertices") -> None:
     """Raise MeshError if any of the (n, 3) ``points`` is NaN / Inf or too large for the geometry in float64."""
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if len(bad):
-        raise MeshError(f"{len(bad)} {what} have non-finite coordinates (NaN or Inf): {_first(bad)}")
+        raise MeshError(f"{len(bad)} {what} have non-finite coordinates (NaN or Inf): {format_ids(bad)}")
     big = np.abs(points).max() if len(points) else 0.0
     if big > _LARGEST_COORDINATE:
         raise MeshError(
@@ -417,7 +418,7 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, manifold: bool) -> None:
     if len(bad):
         raise MeshError(
             f"{len(bad)} faces have zero area (collinear vertices), first: face {bad[0]} = "
-            f"{faces[bad[0]].tolist()}: {_first(bad)}"
+            f"{faces[bad[0]].tolist()}: {format_ids(bad)}"
         )
     sorted_faces = np.sort(faces, axis=1)
     _, first_index, counts = _unique_rows(sorted_faces, return_index=True, return_counts=True)

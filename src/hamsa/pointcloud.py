@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from hamsa.errors import MeshError, MissingDependencyError
-from hamsa.mesh import TriMesh, _first, as_coordinates, as_trimesh, check_coordinates
+from hamsa.mesh import TriMesh, as_coordinates, as_trimesh, check_coordinates, format_ids
 
 DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
 
@@ -76,7 +76,7 @@ class PointCloud:
         if len(repeated):
             i = int(repeated[0])
             raise MeshError(
-                f"{len(repeated)} points repeat another point exactly ({_first(repeated)}; point {i} equals point "
+                f"{len(repeated)} points repeat another point exactly ({format_ids(repeated)}; point {i} equals point "
                 f"{int(nearest[i, 1]) if nearest[i, 1] != i else int(nearest[i, 0])}): remove the duplicates"
             )
         points.flags.writeable = False
