@@ -352,3 +352,28 @@ def test_extra_arrays_come_back_from_one_read(tmp_path, basis):
     back, extra = hamsa.Eigenbasis.load_with_extra(tmp_path / "b.npz")
     assert sorted(extra) == ["cache_key", "labels"] and str(extra["cache_key"]) == "abc"
     np.testing.assert_array_equal(back.values, basis.values)
+
+
+def test_an_output_folder_may_be_created_with_its_parents_but_not_through_a_file(tmp_path):
+    from hamsa.files import check_output_folder
+
+    deep = tmp_path / "results" / "scape" / "run1"
+    assert check_output_folder(deep) == deep and not (tmp_path / "results").exists()  # checked, not created
+    (tmp_path / "plain.txt").write_text("x")
+    with pytest.raises(FileAccessError, match="'.*plain.txt' exists and is not a folder"):
+        check_output_folder(tmp_path / "plain.txt" / "run1")
+    with pytest.raises(FileAccessError, match="exists and is not a folder"):
+        check_output_folder(tmp_path / "plain.txt")
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    if os.geteuid() != 0:  # root writes anywhere
+        with pytest.raises(FileAccessError, match="not writable"):
+            check_output_folder(locked / "a" / "b")
+
+
+def test_reproduce_creates_a_nested_output_folder(tmp_path):
+    pytest.importorskip("matplotlib", reason="the figures need the [viz] extra")
+    from hamsa.cli import main
+
+    assert main(["reproduce", "--quick", "--only", "fig1", "-o", str(tmp_path / "a" / "b" / "report")]) == 0
+    assert (tmp_path / "a" / "b" / "report" / "index.html").is_file()

@@ -270,15 +270,19 @@ def check_output(path: str | os.PathLike, *, suffix: str | None = None, inputs=(
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
-    """Check that ``path`` is an existing folder or can be created as one (its parent exists); return it."""
+    """Check that ``path`` is an existing folder or can be created as one, missing parents included (as
+    ``mkdir -p``): the nearest part of it that exists must be a writable folder. Returns it; nothing is
+    created here."""
     folder = Path(path)
     if os.path.lexists(folder) and not folder.is_dir():
         raise FileAccessError(f"output '{folder}' exists and is not a folder")
-    parent = folder.parent if str(folder.parent) else Path(".")
-    if not folder.is_dir() and not parent.is_dir():
-        raise FileAccessError(f"cannot write '{folder}': folder '{parent}' does not exist")
-    if not os.access(folder if folder.is_dir() else parent, os.W_OK | os.X_OK):
-        raise FileAccessError(f"cannot write into '{folder}': not writable")
+    existing = folder
+    while not existing.is_dir():
+        if os.path.lexists(existing):
+            raise FileAccessError(f"cannot create the folder '{folder}': '{existing}' exists and is not a folder")
+        existing = existing.parent
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise FileAccessError(f"cannot write into '{folder}': '{existing}' is not writable")
     return folder
 
 
