@@ -87,7 +87,9 @@ def test_what_has_no_single_fix_is_still_refused():
         repair_mesh(vertices, np.array(faces))
 
 
-def test_load_mesh_repair_warns_and_cli_refuses_then_repairs(tmp_path, ico):
+def test_load_mesh_repair_warns_and_the_cli_warns_on_what_is_only_unusual_then_repairs(tmp_path, ico, capsys):
+    """One validation policy: a flipped face and a second piece give right numbers, so every entry point
+    takes them (the CLI with a warning naming --repair) and answers as hamsa.eigenbasis does."""
     faces = ico.faces.copy()
     faces[7] = faces[7, ::-1]
     path = _write_off(tmp_path / "flipped.off", ico.vertices, faces)
@@ -95,15 +97,24 @@ def test_load_mesh_repair_warns_and_cli_refuses_then_repairs(tmp_path, ico):
         mesh = load_mesh(path, repair=True)
     assert mesh.is_consistently_oriented
     out = tmp_path / "basis.npz"
-    assert main(["basis", str(path), "-k", "4", "-o", str(out)]) == 2 and not out.exists()
+    assert main(["basis", str(path), "-k", "4", "-o", str(out)]) == 0
+    assert "not consistently oriented; the spectrum is unaffected, --repair orients them" in capsys.readouterr().err
+    reference = hamsa.eigenbasis(ico, 4).values
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, reference, rtol=1e-10)
+    np.testing.assert_allclose(hamsa.eigenbasis(load_mesh(path), 4).values, reference, rtol=1e-10)
     assert main(["basis", str(path), "-k", "4", "--repair", "-o", str(out)]) == 0
-    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, hamsa.eigenbasis(ico, 4).values, rtol=1e-10)
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, reference, rtol=1e-10)
     two = tmp_path / "two.off"
-    save_mesh(
-        hamsa.TriMesh(np.vstack([ico.vertices, ico.vertices + 3]), np.vstack([ico.faces, ico.faces + ico.n_vertices])),
-        two,
+    both = hamsa.TriMesh(
+        np.vstack([ico.vertices, ico.vertices + 3]), np.vstack([ico.faces, ico.faces + ico.n_vertices])
     )
-    assert main(["basis", str(two), "-k", "4", "-o", str(out)]) == 2
+    save_mesh(both, two)
+    assert main(["basis", str(two), "-k", "4", "-o", str(out)]) == 0
+    assert "2 disconnected pieces" in capsys.readouterr().err
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, hamsa.eigenbasis(both, 4).values, atol=1e-10)
+    loose = _write_off(tmp_path / "loose.off", np.vstack([ico.vertices, [[5.0, 5.0, 5.0]]]), ico.faces)
+    assert main(["basis", str(loose), "-k", "4", "-o", str(tmp_path / "loose.npz")]) == 2  # singular mass: refused
+    assert "1 unreferenced vertices" in capsys.readouterr().err and not (tmp_path / "loose.npz").exists()
     # --repair keeps the largest piece (the copy that comes second, equal areas tie to it): the saved basis
     # maps its rows back to the input's vertices
     assert main(["basis", str(two), "-k", "4", "--repair", "-o", str(out)]) == 0

@@ -52,9 +52,12 @@ class _Loaded(NamedTuple):
 
 
 def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -> _Loaded:
-    """The mesh (or point cloud) of ``path`` fit for spectral work, or a MeshError naming the defect and the
-    fix. A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud; ``laplacian="tufted"``
-    takes meshes with non-manifold edges, vertices and mixed orientation as they are."""
+    """The mesh (or point cloud) of ``path`` for every command, by one policy. Refused (a MeshError naming the
+    CLI option that fixes it) when the numbers would be wrong: unreferenced vertices (no area, so a singular
+    mass matrix) and edges shared by more than two faces (the cotan Laplacian is undefined there; ``--laplacian
+    tufted`` takes them). Accepted with a warning on stderr when it is only unusual: non-manifold vertices,
+    faces not consistently oriented (the spectrum does not depend on it; normals do) and several pieces
+    (each has its own spectrum). A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud."""
     from hamsa.io import POINTS_ONLY, load_shape, point_format
     from hamsa.pointcloud import PointCloud
 
@@ -74,24 +77,34 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -
     mesh = load_shape(path, manifold=not tufted)
     if isinstance(mesh, PointCloud):
         return _Loaded(mesh, None, mesh.n_vertices)
-    hint = "(--repair fixes it)"
     if len(mesh.unreferenced_vertices):
-        raise MeshError(f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices {hint}")
-    if mesh.non_manifold_vertices.size and not tufted:  # the tufted Laplacian is defined on any triangle set
         raise MeshError(
-            f"'{path}' has {mesh.non_manifold_vertices.size} non-manifold vertices (first: "
-            f"{int(mesh.non_manifold_vertices[0])}; separate fans of faces meet there) {hint} or --laplacian tufted"
+            f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices (no area: the mass matrix would "
+            "be singular); --repair drops them and keeps the way back to the input's vertex ids"
+        )
+    for warning in _unusual(mesh, tufted):
+        print(f"warning: '{path}' {warning}", file=sys.stderr)
+    return _Loaded(mesh, None, mesh.n_vertices)
+
+
+def _unusual(mesh, tufted: bool) -> list[str]:
+    """What is unusual about a mesh but still gives right numbers, each with the option that changes it."""
+    notes = []
+    if mesh.non_manifold_vertices.size and not tufted:
+        notes.append(
+            f"has {mesh.non_manifold_vertices.size} non-manifold vertices (first: {int(mesh.non_manifold_vertices[0])};"
+            " separate fans of faces meet there); the operators are defined, --repair splits them (new vertex ids)"
         )
     if not mesh.is_consistently_oriented and not tufted:
-        raise MeshError(f"'{path}': faces are not consistently oriented {hint}")
+        notes.append("has faces that are not consistently oriented; the spectrum is unaffected, --repair orients them")
     count, labels = mesh.vertex_components
     if count > 1:
-        sizes = np.bincount(labels[labels >= 0])
-        raise MeshError(
-            f"'{path}' has {count} disconnected pieces ({', '.join(map(str, sizes[:5]))} vertices); --repair keeps "
-            "the largest, the Python API handles several"
+        sizes = np.sort(np.bincount(labels[labels >= 0]))[::-1]
+        notes.append(
+            f"has {count} disconnected pieces ({', '.join(map(str, sizes[:5]))}{', ...' if count > 5 else ''} "
+            "vertices), each with its own spectrum; --repair keeps the largest"
         )
-    return _Loaded(mesh, None, mesh.n_vertices)
+    return notes
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -572,7 +585,7 @@ def _match(args) -> None:
     eigensum = args.method != "icskm" and args.basis == "hamiltonian"
     with _Steps(args, 6 if eigensum else 4) as step:
         step("reading the meshes")
-        loaded = [_load_shape(path, args.repair) for path in (args.source, args.target)]
+        loaded = [_load_for_operators(path, args.repair) for path in (args.source, args.target)]
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
         landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
         V = [None, None]
@@ -615,16 +628,6 @@ def _in_input_ids(mapping: np.ndarray, source: _Loaded, target: _Loaded) -> np.n
     result = np.full(source.input_vertices, -1, dtype=np.int64)
     result[source_ids[::-1]] = target_ids[mapping][::-1]  # reversed: the first copy is written last
     return result
-
-
-def _load_shape(path: str, repair: bool) -> _Loaded:
-    """A point cloud, a repaired mesh, or the mesh as it is (several pieces allowed) for ``hamsa match``."""
-    from hamsa.io import load_shape
-
-    if repair:
-        return _load_for_operators(path, repair)
-    shape = load_shape(path)
-    return _Loaded(shape, None, shape.n_vertices)
 
 
 def _to_repaired(vertex: int, loaded: _Loaded) -> int:
