@@ -491,7 +491,7 @@ def run_api_cases(print_line=print) -> dict[str, int]:
 
 
 def main() -> int:
-    counts = {"clear error": 0, "accepted": 0, "traceback": 0, "hang": 0, "partial file": 0, "unsafe": 0}
+    counts = {"clear error": 0, "warned": 0, "accepted": 0, "traceback": 0, "hang": 0, "partial file": 0, "unsafe": 0}
     cases = repaired = info_runs = info_tracebacks = unwarned = 0
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

@@ -40,6 +40,41 @@ def test_basis_writes_a_loadable_npz(mesh_file, tmp_path, capsys):
     np.testing.assert_allclose(basis.values, reference.values, rtol=1e-10)
 
 
+def test_basis_and_view_take_potential_specifications(mesh_file, tmp_path, capsys):
+    """``--potential SPEC`` is :func:`hamsa.potentials.from_spec` on the mesh as read; a bad one exits 2."""
+    from hamsa.potentials import from_spec
+
+    mesh = hamsa.load_mesh(mesh_file)
+    out = tmp_path / "basis.npz"
+    for spec in ("100*geodesic:0", "40*step:z>0.2", "10*eigsum:1-4"):
+        assert main(["basis", str(mesh_file), "-k", "6", "--potential", spec, "-o", str(out)]) == 0
+        reference = hamsa.eigenbasis(mesh, 6, from_spec(mesh, spec))
+        np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, reference.values, rtol=1e-10)
+    page = tmp_path / "view.html"
+    assert main(["view", str(mesh_file), "-k", "3", "--potential", "100*geodesic:0", "-o", str(page)]) == 0
+    assert page.stat().st_size > 1000
+    capsys.readouterr()
+    assert main(["basis", str(mesh_file), "-k", "6", "--potential", "step:z>99", "-o", str(out)]) == 2
+    assert "no vertex has z > 99" in capsys.readouterr().err
+
+
+def test_a_potential_file_of_the_input_follows_repair(tmp_path, capsys):
+    """After --repair drops a loose vertex, a potential with one value per input vertex is restricted to
+    the vertices kept (as the basis' vertex_ids say)."""
+    capsule = shapes.capsule(n_around=16)
+    path = tmp_path / "loose.off"
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], capsule.vertices]), capsule.faces + 1), path)
+    V = np.linspace(0, 5, capsule.n_vertices + 1)
+    np.save(tmp_path / "v.npy", V)
+    out = tmp_path / "basis.npz"
+    assert (
+        main(["basis", str(path), "-k", "5", "--repair", "--potential", str(tmp_path / "v.npy"), "-o", str(out)]) == 0
+    )
+    saved = hamsa.Eigenbasis.load(out)
+    np.testing.assert_array_equal(saved.vertex_ids, np.arange(1, capsule.n_vertices + 1))
+    np.testing.assert_allclose(saved.values, hamsa.eigenbasis(capsule, 5, V[1:]).values, rtol=1e-10)
+
+
 @pytest.mark.parametrize(
     "case, message",
     [

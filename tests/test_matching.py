@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 
@@ -563,3 +565,69 @@ def test_cli_match_with_repair_answers_in_the_inputs_vertex_ids(tmp_path, pair, 
     assert mapping.shape == (n + 3,) and np.all(mapping[n:] == -1) and mapping[:n].min() >= 1
     errors = geodesic_errors(rolled, mapping[:n] - 1, np.arange(n))
     assert summary(errors)["within_0.05"] > 0.9
+
+
+def test_cli_match_with_given_potentials_and_truth_equals_the_python_api(tmp_path, capsys):
+    """``hamsa match --source-potential/--target-potential SPEC --truth identity --fmap``: the map, C and the
+    Kim et al. scores are those of from_spec + eigenbasis + match + map_scores on the same inputs."""
+    from hamsa import matching
+    from hamsa.cli import main
+    from hamsa.evaluation import THRESHOLDS, map_scores
+    from hamsa.matching import functional_from_map
+    from hamsa.potentials import from_spec
+
+    rest, walk = shapes.humanoid("rest", spacing=0.05), shapes.humanoid("walk", spacing=0.05)
+    hamsa.save_mesh(rest, tmp_path / "rest.off")
+    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    foot = int(np.argmin(rest.vertices[:, 2]))
+    spec = f"50*geodesic:{foot}"
+    out, fmap = tmp_path / "map.npy", tmp_path / "C.npy"
+    command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "fmap", "-k", "30",
+               "--source-potential", spec, "--target-potential", spec, "--truth", "identity", "--points", "300",
+               "--fmap", str(fmap), "-o", str(out)]  # fmt: skip
+    assert main(command) == 0
+    assert "fmap (given potentials basis)" in capsys.readouterr().out
+    meshes = [
+        m.scaled_to_unit_area()
+        for m in (hamsa.load_mesh(tmp_path / "rest.off"), hamsa.load_mesh(tmp_path / "walk.off"))
+    ]
+    bases = [hamsa.eigenbasis(m, 30, from_spec(raw, spec)) for m, raw in zip(meshes, (rest, walk))]
+    expected = matching.match(*bases, "fmap", meshes=meshes)
+    np.testing.assert_array_equal(np.load(out), expected)
+    np.testing.assert_allclose(np.load(fmap), functional_from_map(expected, *bases), atol=1e-12)
+    scores = map_scores(meshes[1], expected, np.arange(rest.n_vertices), points=300)
+    written = json.loads((tmp_path / "map.scores.json").read_text())
+    assert written["points"] == 300 and written["thresholds"] == THRESHOLDS.tolist()
+    for key in ("auc", "mean_error", "within_0.05", "curve"):
+        np.testing.assert_allclose(written[key], scores[key], rtol=1e-12)
+    assert written["auc"] > 0.8  # a foot landmark on both poses: measured 0.95
+
+
+def test_cli_match_truth_in_input_ids_through_repair(tmp_path, pair, capsys):
+    """--truth is given in the inputs' vertex ids; with --repair it is carried to the repaired meshes (the
+    loose source triangle is not scored) and the scores equal the Python API's on the repaired meshes."""
+    from hamsa.cli import main
+    from hamsa.evaluation import map_scores
+
+    flat, rolled = pair
+    n = flat.n_vertices
+    loose = np.array([[5.0, 5.0, 5.0], [6.0, 5.0, 5.0], [5.0, 6.0, 5.0]])
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([flat.vertices, loose]), np.vstack([flat.faces, [[n, n + 1, n + 2]]])),
+                    tmp_path / "source.off")  # fmt: skip
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], rolled.vertices]), rolled.faces + 1), tmp_path / "t.off")
+    truth = np.concatenate([np.arange(n) + 1, [0, 0, -1]])  # input ids; the loose triangle maps nowhere real
+    np.save(tmp_path / "truth.npy", truth)
+    out = tmp_path / "map.npy"
+    command = ["match", str(tmp_path / "source.off"), str(tmp_path / "t.off"), "--method", "hks", "--basis", "lbo",
+               "--repair", "--truth", str(tmp_path / "truth.npy"), "--scores", str(tmp_path / "s.json"),
+               "-o", str(out)]  # fmt: skip
+    assert main(command) == 0
+    capsys.readouterr()
+    written = json.loads((tmp_path / "s.json").read_text())
+    mapping = np.load(out)[:n] - 1  # back in the repaired target's ids
+    expected = map_scores(rolled.scaled_to_unit_area(), mapping, np.arange(n))
+    assert written["points"] == min(1000, n)
+    np.testing.assert_allclose(written["auc"], expected["auc"], rtol=1e-12)
+    np.save(tmp_path / "short.npy", truth[:-1])
+    assert main(command[:-6] + ["--truth", str(tmp_path / "short.npy"), "-o", str(out)]) == 2
+    assert f"has {n + 2} entries, the source has {n + 3} vertices" in capsys.readouterr().err

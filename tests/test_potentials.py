@@ -121,3 +121,54 @@ def test_dalmatian_texture_is_seeded_geodesic_spots():
     np.testing.assert_allclose(luminance, colors[:, 0])  # grey: luminance = any channel
     with pytest.raises(PotentialError):
         potentials.dalmatian_texture(mesh, spots=0)
+
+
+def test_potential_specifications_equal_the_functions_they_name():
+    from hamsa.potentials import eigenfunction_sum, from_spec, is_spec
+
+    mesh = shapes.humanoid(spacing=0.05)
+    np.testing.assert_array_equal(
+        from_spec(mesh, "100*geodesic:3,40"), 100 * geodesic_distance(mesh, [3, 40], normalize=True)
+    )
+    np.testing.assert_array_equal(from_spec(mesh, "step:z>0.9"), potentials.step(mesh, mesh.vertices[:, 2] > 0.9, 1.0))
+    np.testing.assert_array_equal(from_spec(mesh, "2.5*step:x<0"), potentials.step(mesh, mesh.vertices[:, 0] < 0, 2.5))
+    lbo = hamsa.eigenbasis(mesh, 5)
+    np.testing.assert_allclose(from_spec(mesh, "eigsum:1-4"), eigenfunction_sum(lbo), atol=1e-10)
+    np.testing.assert_allclose(from_spec(mesh, "eigsum:1,3"), eigenfunction_sum(lbo, (1, 3)), atol=1e-10)
+    np.testing.assert_array_equal(from_spec(mesh, "curvature:mean"), potentials.curvature(mesh, "mean"))
+    assert is_spec("geodesic:1") and is_spec(" 3*step:y>0 ") and not is_spec("V.npy") and not is_spec("C:/V.npy")
+
+
+def test_a_geodesic_specification_on_a_repaired_mesh_takes_input_ids():
+    from hamsa.potentials import from_spec
+
+    mesh = shapes.humanoid(spacing=0.05)
+    vertex_ids = np.arange(mesh.n_vertices) + 7  # as if 7 vertices before these were dropped
+    np.testing.assert_array_equal(
+        from_spec(mesh, "geodesic:17", vertex_ids), geodesic_distance(mesh, [10], normalize=True)
+    )
+    with pytest.raises(PotentialError, match="input vertex 3 is not in the repaired mesh"):
+        from_spec(mesh, "geodesic:3", vertex_ids)
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("geodesic:a", "not a comma-separated list of integers"),
+        ("geodesic:99999", "vertex 99999 is not in 0..1005"),
+        ("step:w>1", "AXIS>VALUE or AXIS<VALUE"),
+        ("step:z>100", r"no vertex has z > 100 \(z is in"),
+        ("step:z>-100", "every vertex has z > -100"),
+        ("eigsum:1-2-3", "FIRST-LAST"),
+        ("curvature:foo", "mean, absolute_mean or gaussian"),
+        ("inf*step:z>0", "'inf' is not a finite number"),
+        ("foo:1", "KIND one of geodesic, step, eigsum, curvature"),
+    ],
+)
+def test_malformed_potential_specifications_are_refused_by_name(spec, message):
+    from hamsa.potentials import from_spec
+
+    mesh = shapes.humanoid(spacing=0.05)
+    assert mesh.n_vertices == 1006
+    with pytest.raises(PotentialError, match=message):
+        from_spec(mesh, spec)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import json
 import os
 import sys
 import time
@@ -36,6 +37,14 @@ def _positive_int(text: str) -> int:
 REPAIR_HELP = (
     "fix what has one right fix (duplicate or degenerate faces, non-manifold vertices, orientation, unreferenced "
     "vertices) and keep the largest connected component, instead of refusing the mesh"
+)
+
+
+POTENTIAL_HELP = (
+    "potential V: a specification [SCALE*]KIND:ARGS -- geodesic:I[,J..] (distance from vertices, in [0, 1]), "
+    "step:AXIS>VALUE or step:AXIS<VALUE (1 there, 0 elsewhere; coordinates as in the file), eigsum:I-J (sum of "
+    "LBO eigenfunctions I..J, 0-based: eigsum:1-4 is the paper's matching potential), curvature:mean|gaussian -- "
+    "e.g. 100*geodesic:12,40; or a .npy / text file with one value per vertex (of the input, also with --repair)"
 )
 
 
@@ -124,7 +133,7 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     basis.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     basis.add_argument("-k", type=_positive_int, required=True, help="number of eigenpairs")
-    basis.add_argument("--potential", help="potential V: .npy, or a text file with one value per vertex")
+    basis.add_argument("--potential", help=POTENTIAL_HELP)
     basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
     basis.add_argument(
@@ -218,6 +227,23 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help=REPAIR_HELP + "; the map is saved in the inputs' vertex ids (-1 for source vertices removed)",
     )
+    match.add_argument(
+        "--source-potential",
+        metavar="POTENTIAL",
+        help="with --target-potential: the Hamiltonian bases of these potentials instead of --basis (any method); "
+        "each is a specification or a file as in 'hamsa basis --potential', evaluated on the mesh as read (e.g. "
+        "100*geodesic:12 and 100*geodesic:40 for one known pair)",
+    )
+    match.add_argument("--target-potential", metavar="POTENTIAL", help="the target's, see --source-potential")
+    match.add_argument(
+        "--truth",
+        help="score the map by the Kim et al. protocol against this ground truth: 'identity' (vertex i <-> i) or a "
+        ".npy / text file of target vertex ids per source vertex (-1: unknown); prints the scores and writes them "
+        "with the curve to --scores",
+    )
+    match.add_argument("--points", type=_positive_int, default=1000, help="--truth: scored vertices (default 1000)")
+    match.add_argument("--scores", help="--truth: output .json (default: the output's name with .scores.json)")
+    match.add_argument("--fmap", help="also save the functional map C (k x k, source rows) of the final map as .npy")
     match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
@@ -278,7 +304,7 @@ def _parser() -> argparse.ArgumentParser:
     view.add_argument("mesh", help=f"mesh file (OFF, OBJ, PLY, STL; .gz too) or {POINTS_HELP}")
     view.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions to show (default 10)")
-    view.add_argument("--potential", help=".npy or text file with one potential value per vertex")
+    view.add_argument("--potential", help=POTENTIAL_HELP)
     view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
 
     reproduce = commands.add_parser(
@@ -327,24 +353,42 @@ class _Steps:
         self.bar.close()
 
 
-def _load_potential(path: str, n: int) -> np.ndarray:
+def _potential_file(text: str | None) -> str | None:
+    """The file named by a ``--potential`` option, None for a specification or no option."""
+    from hamsa.potentials import is_spec
+
+    return None if text is None or is_spec(text) else text
+
+
+def _potential(text: str | None, loaded: _Loaded) -> np.ndarray | None:
+    """``--potential``: a specification (:func:`hamsa.potentials.from_spec`, vertex ids of the input) or a
+    file with one value per vertex of the mesh used or, after ``--repair``, of the input."""
     from hamsa.errors import PotentialError
     from hamsa.files import load_array, read_text
     from hamsa.operators import check_potential
+    from hamsa.potentials import from_spec
 
+    if text is None:
+        return None
+    if _potential_file(text) is None:
+        return from_spec(loaded.mesh, text, loaded.vertex_ids)
+    n = loaded.mesh.n_vertices
+    rows = n if loaded.vertex_ids is None else None  # after a repair: the mesh's count or the input's
     try:
-        if path.endswith(".npy"):
-            values = load_array(path, ndim=(1, 2), rows=n)
+        if text.endswith(".npy"):
+            values = load_array(text, ndim=(1, 2), rows=rows)
         else:
-            values = np.loadtxt(io.StringIO(read_text(path)), ndmin=1)
+            values = np.loadtxt(io.StringIO(read_text(text)), ndmin=1)
     except HamsaError as exc:
         raise PotentialError(f"potential: {exc}") from None
     except ValueError as exc:
-        raise PotentialError(f"cannot read potential '{path}': {exc}") from None
+        raise PotentialError(f"cannot read potential '{text}': {exc}") from None
+    if loaded.vertex_ids is not None and len(values) == loaded.input_vertices != n:
+        values = values[loaded.vertex_ids]  # one value per input vertex: those the repair kept
     try:
         return check_potential(values, n)
     except PotentialError as exc:
-        raise PotentialError(f"'{path}': {exc}") from None
+        raise PotentialError(f"'{text}': {exc}") from None
 
 
 def _load_ids(path: str) -> np.ndarray:
@@ -418,13 +462,14 @@ def _basis(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.pointcloud import PointCloud
 
-    output = _output_path(args, ".npz", args.mesh, args.potential)
+    output = _output_path(args, ".npz", args.mesh, _potential_file(args.potential))
     start = time.perf_counter()
     with _Steps(args, 3) as step:
         step(f"reading {Path(args.mesh).name}")
-        mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair, args.laplacian)
+        given = _load_for_operators(args.mesh, args.repair, args.laplacian)
+        mesh, vertex_ids = given.mesh, given.vertex_ids
         loaded = time.perf_counter()
-        potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+        potential = _potential(args.potential, given)
         boundary = args.boundary if args.boundary in ("neumann", "dirichlet") else _load_ids(args.boundary)
         step(f"solving for {args.k} eigenpairs of n = {mesh.n_vertices}")
         basis = eigenbasis(
@@ -572,52 +617,119 @@ def _modes(args) -> None:
 
 
 def _match(args) -> None:
-    from hamsa.eigen import eigenbasis
+    from hamsa.evaluation import THRESHOLDS, map_scores
     from hamsa.files import atomic_write
-    from hamsa.geodesic import geodesic_distance
-    from hamsa.matching import match, matching_potentials
+    from hamsa.matching import functional_from_map, match
 
-    output = _output_path(args, ".npy", args.source, args.target)
+    outputs = _match_outputs(args)
     start = time.perf_counter()
     if args.method != "icskm" and args.landmarks:
         raise HamsaError("--landmarks is for --method icskm")
+    if (args.source_potential is None) != (args.target_potential is None):
+        raise HamsaError("--source-potential and --target-potential go together (one potential per shape)")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
-    eigensum = args.method != "icskm" and args.basis == "hamiltonian"
-    with _Steps(args, 6 if eigensum else 4) as step:
+    with _Steps(args, 7) as step:
         step("reading the meshes")
         loaded = [_load_for_operators(path, args.repair) for path in (args.source, args.target)]
+        truth = _truth(args.truth, *loaded) if args.truth else None
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
         landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
-        V = [None, None]
-        if args.method == "icskm" and args.landmark_scale != 0:
-            V = [
-                args.landmark_scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest")
-                for m, ids in zip(meshes, landmarks)
-            ]
-        bases = []
-        for side, mesh, potential in zip(("source", "target"), meshes, V):
-            step(f"{side} {'LBO ' if eigensum else ''}eigenbasis (k = {k}, n = {mesh.n_vertices})")
-            bases.append(eigenbasis(mesh, k, potential))
-        if eigensum:
-            V = matching_potentials(*bases, meshes=meshes)
-            bases = []
-            for side, mesh, potential in zip(("source", "target"), meshes, V):
-                step(f"{side} Hamiltonian eigenbasis, matching potential (k = {k}, n = {mesh.n_vertices})")
-                bases.append(eigenbasis(mesh, k, potential))
+        bases, basis = _match_bases(args, loaded, meshes, landmarks, k, step)
         step(f"matching ({args.method})")
         mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes)
-    mapped = len(mapping)
-    if loaded[0].vertex_ids is not None or loaded[1].vertex_ids is not None:
-        mapping = _in_input_ids(mapping, *loaded)
-        print(f"map in input vertex ids; {int(np.sum(mapping < 0))} source vertices removed by --repair map to -1")
-    with atomic_write(output) as handle:
-        np.save(handle, mapping)
-    basis = "matching potential" if eigensum else "LBO" if V[0] is None else "landmark potential"
+        if truth is not None:
+            step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
+            scores = map_scores(meshes[1], mapping, truth, args.points)
+    saved = _in_input_ids(mapping, *loaded) if any(item.vertex_ids is not None for item in loaded) else mapping
+    if saved is not mapping:
+        print(f"map in input vertex ids; {int(np.sum(saved < 0))} source vertices removed by --repair map to -1")
+    with atomic_write(outputs["map"]) as handle:
+        np.save(handle, saved)
     print(
-        f"{args.method} ({basis} basis): mapped {mapped} source vertices onto {meshes[1].n_vertices} target "
+        f"{args.method} ({basis} basis): mapped {len(mapping)} source vertices onto {meshes[1].n_vertices} target "
         f"vertices (k = {k}) in {time.perf_counter() - start:.1f} s"
     )
-    print(f"wrote           {output}")
+    if args.fmap:
+        with atomic_write(outputs["fmap"]) as handle:
+            np.save(handle, functional_from_map(mapping, *bases))
+    if truth is not None:
+        print(
+            f"scores          AUC {scores['auc']:.4f} on [0, 0.25], within 0.05: {scores['within_0.05']:.4f}, "
+            f"mean error {scores['mean_error']:.4f} (geodesic / sqrt(area), {scores['points']} vertices)"
+        )
+        with atomic_write(outputs["scores"], "w") as handle:
+            json.dump({**scores, "thresholds": THRESHOLDS.tolist(), "method": args.method, "basis": basis}, handle)
+    print("wrote           " + ", ".join(str(path) for path in outputs.values()))
+
+
+def _match_outputs(args) -> dict:
+    """The files ``hamsa match`` writes, each checked before any work: the map, and C and the scores when asked."""
+    from hamsa.files import check_output
+
+    inputs = (args.source, args.target, args.truth, _potential_file(args.source_potential),
+              _potential_file(args.target_potential))  # fmt: skip
+    outputs = {"map": _output_path(args, ".npy", *inputs)}
+    if args.fmap:
+        outputs["fmap"] = check_output(args.fmap, suffix=".npy", inputs=[x for x in (*inputs, args.output) if x])
+    if args.truth:
+        scores = args.scores or str(outputs["map"].with_suffix(".scores.json"))
+        outputs["scores"] = check_output(scores, suffix=".json", inputs=[x for x in (*inputs, args.output) if x])
+    elif args.scores:
+        raise HamsaError("--scores is for --truth")
+    return outputs
+
+
+def _match_bases(args, loaded, meshes, landmarks, k: int, step):
+    """The two eigenbases ``hamsa match`` matches in and their name: the given potentials', the landmark
+    potential's (icskm), the paper's matching potential (``--basis hamiltonian``) or the LBO's."""
+    from hamsa.eigen import eigenbasis
+    from hamsa.geodesic import geodesic_distance
+    from hamsa.matching import matching_potentials
+
+    if args.source_potential is not None:
+        V = [_potential(text, item) for text, item in zip((args.source_potential, args.target_potential), loaded)]
+        name = "given potentials"
+    elif args.method == "icskm":
+        scale = args.landmark_scale
+        V = [scale * geodesic_distance(m, ids, normalize=True, unreachable="farthest") if scale else None
+             for m, ids in zip(meshes, landmarks)]  # fmt: skip
+        name = "landmark potential" if scale else "LBO"
+    elif args.basis == "hamiltonian":
+        lbo = []
+        for side, mesh in zip(("source", "target"), meshes):
+            step(f"{side} LBO eigenbasis (k = {k}, n = {mesh.n_vertices})")
+            lbo.append(eigenbasis(mesh, k))
+        V, name = matching_potentials(*lbo, meshes=meshes), "matching potential"
+    else:
+        V, name = [None, None], "LBO"
+    bases = []
+    for side, mesh, potential in zip(("source", "target"), meshes, V):
+        step(f"{side} {'LBO' if potential is None else 'Hamiltonian'} eigenbasis (k = {k}, n = {mesh.n_vertices})")
+        bases.append(eigenbasis(mesh, k, potential))
+    return bases, name
+
+
+def _truth(text: str, source: _Loaded, target: _Loaded) -> np.ndarray:
+    """``--truth`` in the meshes used: (n_source used,) target ids, -1 where unknown or removed by --repair.
+    The file (or 'identity') gives one target id per source vertex of the input."""
+    if text == "identity":
+        given = np.arange(source.input_vertices)
+        given[given >= target.input_vertices] = -1
+    else:
+        given = _load_ids(text)
+        if given.shape != (source.input_vertices,):
+            raise HamsaError(
+                f"--truth '{text}' has {given.size} entries, the source has {source.input_vertices} vertices"
+            )
+        if given.size and (given.min() < -1 or given.max() >= target.input_vertices):
+            raise HamsaError(f"--truth '{text}' holds ids outside -1..{target.input_vertices - 1} (target vertices)")
+    source_ids = np.arange(source.mesh.n_vertices) if source.vertex_ids is None else source.vertex_ids
+    position = np.arange(target.input_vertices)
+    if target.vertex_ids is not None:  # input target vertex -> its first copy in the repaired mesh, or -1
+        position = np.full(target.input_vertices, -1)
+        position[target.vertex_ids[::-1]] = np.arange(len(target.vertex_ids))[::-1]
+    wanted = given[source_ids]
+    return np.where(wanted >= 0, position[np.maximum(wanted, 0)], -1)
 
 
 def _in_input_ids(mapping: np.ndarray, source: _Loaded, target: _Loaded) -> np.ndarray:
@@ -704,9 +816,10 @@ def _view(args) -> None:
     from hamsa.eigen import eigenbasis
     from hamsa.viz import to_html
 
-    output = _output_path(args, ".html", args.mesh, args.potential)
-    mesh = _load_for_operators(args.mesh, args.repair).mesh
-    potential = _load_potential(args.potential, mesh.n_vertices) if args.potential else None
+    output = _output_path(args, ".html", args.mesh, _potential_file(args.potential))
+    shape = _load_for_operators(args.mesh, args.repair)
+    mesh = shape.mesh
+    potential = _potential(args.potential, shape)
     basis = eigenbasis(mesh, args.k, potential)
     fields = {} if potential is None else {"potential V": potential}
     fields |= {f"psi{i + 1} (E = {value:.4g})": basis.vectors[:, i] for i, value in enumerate(basis.values)}

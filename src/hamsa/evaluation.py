@@ -136,3 +136,30 @@ def summary(errors) -> dict:
         "within_0.05": float(np.mean(errors <= 0.05)),
         "unreachable": float(np.mean(~finite)),
     }
+
+
+def evaluated_points(ground_truth, count: int = 1000, seed: int = 0) -> np.ndarray:
+    """The source vertices a map is scored at: ``count`` of those with a known true image (ground truth
+    (n_s,) target ids, -1 where unknown), drawn reproducibly by :func:`sample_points`."""
+    truth = np.asarray(ground_truth)
+    if truth.ndim != 1 or not np.issubdtype(truth.dtype, np.integer):
+        raise HamsaError(f"ground truth must be a 1-D array of integer target ids, got {truth.dtype} {truth.shape}")
+    known = np.flatnonzero(truth >= 0)
+    if not len(known):
+        raise HamsaError("the ground truth has no known image (every entry is -1)")
+    return known[sample_points(len(known), count, seed)]
+
+
+def map_scores(target, map_source_to_target, ground_truth, points: int = 1000, seed: int = 0) -> dict:
+    """The Kim et al. scores of a point map: :func:`summary` of the geodesic errors at ``points`` source
+    vertices (:func:`evaluated_points`), plus ``points`` (how many) and ``curve`` (the cumulative curve on
+    :data:`THRESHOLDS`). ``map_source_to_target`` and ``ground_truth``: (n_s,) target ids, -1 in the
+    truth where unknown. What ``hamsa match --truth`` reports."""
+    mapping, truth = np.asarray(map_source_to_target), np.asarray(ground_truth)
+    if mapping.shape != truth.shape:
+        raise HamsaError(
+            f"the map has shape {mapping.shape}, the ground truth {truth.shape}: one entry per source vertex"
+        )
+    chosen = evaluated_points(truth, points, seed)
+    errors = geodesic_errors(target, mapping[chosen], truth[chosen])
+    return {**summary(errors), "points": len(chosen), "curve": error_curve(errors).tolist()}

@@ -10,10 +10,13 @@ landmark potential of ICSKM is the normalized geodesic distance,
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
-from hamsa.eigen import Eigenbasis
+from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError, PotentialError
+from hamsa.geodesic import geodesic_distance
 from hamsa.mesh import as_trimesh
 from hamsa.operators import stiffness_matrix, vertex_areas
 from hamsa.pointcloud import as_shape
@@ -178,3 +181,118 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
         full[boundary] = np.pi
         return (full - angles) / areas
     raise HamsaError(f"curvature kind must be 'mean', 'absolute_mean' or 'gaussian', got {kind!r}")
+
+
+SPEC_KINDS = ("geodesic", "step", "eigsum", "curvature")
+_SPEC = re.compile(r"^(?:(?P<scale>[^*:]+)\*)?(?P<kind>[a-z]+):(?P<arguments>.*)$")
+
+
+def is_spec(text: str) -> bool:
+    """Whether ``text`` reads as a potential specification (``[SCALE*]KIND:ARGUMENTS``) rather than a file."""
+    match = _SPEC.match(text.strip())
+    return match is not None and match["kind"] in SPEC_KINDS
+
+
+def from_spec(shape, spec: str, vertex_ids=None) -> np.ndarray:
+    """A potential (n,) from a one-line specification, ``[SCALE*]KIND:ARGUMENTS`` (the CLI's ``--potential``):
+
+    - ``geodesic:I[,J,...]``: geodesic distance from the vertices I, J, ... normalized to [0, 1] (the
+      paper's landmark potential; pieces without a source get 1);
+    - ``step:AXIS>VALUE`` or ``step:AXIS<VALUE``: 1 where the x, y or z coordinate (in the shape's own
+      units) is above (below) VALUE, 0 elsewhere (the paper's step potential, Fig. 2);
+    - ``eigsum:I-J`` or ``eigsum:I,J,...``: :func:`eigenfunction_sum` of the shape's LBO eigenfunctions
+      with those 0-based indices (``eigsum:1-4`` is the paper's phi_2..phi_5), in [0, 2];
+    - ``curvature:mean|absolute_mean|gaussian``: :func:`curvature`;
+
+    times SCALE (default 1), e.g. ``100*geodesic:12,40``. ``vertex_ids`` (n,): when ``shape`` is a
+    repaired copy of an input, the input vertex of each of its vertices (``Eigenbasis.vertex_ids``); the
+    ids in a ``geodesic`` spec are then the input's.
+
+    Raises
+    ------
+    PotentialError
+        On a malformed specification, an unknown kind or axis, a vertex id outside the shape (or removed by
+        a repair), or a scale that is not a finite number.
+    """
+    shape = as_shape(shape)
+    match = _SPEC.match(spec.strip())
+    if match is None or match["kind"] not in SPEC_KINDS:
+        raise PotentialError(
+            f"potential {spec!r} is not [SCALE*]KIND:ARGUMENTS with KIND one of {', '.join(SPEC_KINDS)} "
+            "(e.g. 100*geodesic:12,40 or step:z>0.5)"
+        )
+    scale = _spec_scale(match["scale"], spec)
+    kind, arguments = match["kind"], match["arguments"].strip()
+    if kind == "geodesic":
+        ids = _spec_vertices(_spec_integers(arguments, spec), shape.n_vertices, vertex_ids, spec)
+        values = geodesic_distance(shape, ids, normalize=True, unreachable="farthest")
+    elif kind == "step":
+        values = _spec_step(shape, arguments, spec)
+    elif kind == "eigsum":
+        bounds = _spec_integers(arguments.replace("-", ","), spec) if "-" in arguments else None
+        if bounds is not None and len(bounds) != 2:
+            raise PotentialError(f"potential {spec!r}: a range of eigenfunctions is FIRST-LAST, e.g. eigsum:1-4")
+        indices = list(range(bounds[0], bounds[1] + 1)) if bounds else _spec_integers(arguments, spec)
+        if not indices or min(indices) < 0:
+            raise PotentialError(f"potential {spec!r}: eigsum needs 0-based indices, e.g. eigsum:1-4")
+        values = eigenfunction_sum(eigenbasis(shape, max(indices) + 1), indices)
+    else:
+        if arguments not in ("mean", "absolute_mean", "gaussian"):
+            raise PotentialError(f"potential {spec!r}: curvature is mean, absolute_mean or gaussian")
+        values = curvature(shape, arguments)
+    return scale * values
+
+
+def _spec_scale(text: str | None, spec: str) -> float:
+    if text is None:
+        return 1.0
+    try:
+        scale = float(text)
+    except ValueError:
+        scale = float("nan")
+    if not np.isfinite(scale):
+        raise PotentialError(f"potential {spec!r}: the scale {text!r} is not a finite number")
+    return scale
+
+
+def _spec_integers(text: str, spec: str) -> list[int]:
+    try:
+        return [int(part) for part in text.split(",")]
+    except ValueError:
+        raise PotentialError(f"potential {spec!r}: {text!r} is not a comma-separated list of integers") from None
+
+
+def _spec_vertices(ids: list[int], n: int, vertex_ids, spec: str) -> np.ndarray:
+    """Vertex ids of the spec as ids of the shape (input ids through ``vertex_ids`` after a repair)."""
+    if vertex_ids is None:
+        bad = [i for i in ids if not 0 <= i < n]
+        if bad:
+            raise PotentialError(f"potential {spec!r}: vertex {bad[0]} is not in 0..{n - 1}")
+        return np.asarray(ids, dtype=np.int64)
+    vertex_ids = np.asarray(vertex_ids)
+    found = []
+    for i in ids:
+        hits = np.flatnonzero(vertex_ids == i)
+        if not len(hits):
+            raise PotentialError(f"potential {spec!r}: input vertex {i} is not in the repaired mesh")
+        found.append(int(hits[0]))
+    return np.asarray(found, dtype=np.int64)
+
+
+def _spec_step(shape, arguments: str, spec: str) -> np.ndarray:
+    step_form = re.fullmatch(r"\s*([xyz])\s*([<>])\s*(\S+)\s*", arguments)
+    if step_form is None:
+        raise PotentialError(f"potential {spec!r}: a step is AXIS>VALUE or AXIS<VALUE with AXIS x, y or z")
+    axis, sign, text = step_form.groups()
+    try:
+        threshold = float(text)
+    except ValueError:
+        raise PotentialError(f"potential {spec!r}: {text!r} is not a number") from None
+    coordinate = shape.vertices[:, "xyz".index(axis)]
+    region = coordinate > threshold if sign == ">" else coordinate < threshold
+    if not region.any() or region.all():
+        raise PotentialError(
+            f"potential {spec!r}: {'every' if region.all() else 'no'} vertex has {axis} {sign} {threshold:g} "
+            f"({axis} is in [{coordinate.min():.4g}, {coordinate.max():.4g}]): the step would be constant"
+        )
+    return step(shape, region, 1.0)

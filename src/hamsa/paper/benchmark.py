@@ -45,7 +45,7 @@ from hamsa.cache import content_key, load_record, save_record
 from hamsa.datasets import Dataset, cached_eigenbasis
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.evaluation import TruthDistances, error_curve, sample_points, summary
+from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summary
 from hamsa.files import atomic_write
 from hamsa.geodesic import geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
@@ -141,7 +141,7 @@ def evaluate_pair(
     if not (np.isfinite(landmark_scale) and landmark_scale > 0):
         raise HamsaError(f"landmark_scale must be a positive number, got {landmark_scale}")
     candidates = np.flatnonzero(truth >= 0)
-    chosen = candidates[sample_points(len(candidates), points, seed)]
+    chosen = evaluated_points(truth, points, seed)
     distances = TruthDistances(target, truth[chosen])
     solve = _basis_solver(k, cache_dir)
     potential_of = _ORACLE_POTENTIAL_OF if oracle else _POTENTIAL_OF
