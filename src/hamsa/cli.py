@@ -300,11 +300,26 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--scheduler", help="Dask scheduler address: run the pairs on that cluster")
     bench.add_argument("-o", "--output", required=True, help="results folder (resumable: finished pairs are kept)")
 
-    view = commands.add_parser("view", help="an interactive HTML page of the first eigenfunctions (rotate, switch)")
+    view = commands.add_parser(
+        "view", help="an interactive HTML page: eigenfunctions, a saved basis, fields, modes, or a map (colours)"
+    )
     view.add_argument("mesh", help=f"mesh file (OFF, OBJ, PLY, STL; .gz too) or {POINTS_HELP}")
-    view.add_argument("--repair", action="store_true", help=REPAIR_HELP)
-    view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions to show (default 10)")
-    view.add_argument("--potential", help=POTENTIAL_HELP)
+    view.add_argument("--repair", action="store_true", help=REPAIR_HELP + " (as when the shown file was computed)")
+    view.add_argument("-k", type=_positive_int, default=10, help="eigenfunctions (or modes) to show (default 10)")
+    view.add_argument("--potential", help=POTENTIAL_HELP + "; shown first, then the Hamiltonian's eigenfunctions")
+    shown = view.add_mutually_exclusive_group()
+    shown.add_argument("--basis", help="show the eigenfunctions of a saved basis (.npz of hamsa basis) of MESH")
+    shown.add_argument("--field", nargs="+", metavar="F.npy", help="show per-vertex fields (.npy: (n,) or (n, m))")
+    shown.add_argument("--modes", help="show the compressed modes of a .npz of hamsa modes")
+    shown.add_argument(
+        "--map",
+        help="show a map (.npy of hamsa match) from MESH to --target: target coloured by position, MESH by "
+        "the colours of its images",
+    )
+    view.add_argument("--target", help="--map: the target mesh")
+    view.add_argument(
+        "--constant", action="store_true", help="also show a constant first eigenfunction (skipped by default)"
+    )
     view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
 
     reproduce = commands.add_parser(
@@ -813,19 +828,84 @@ def _benchmark_matching(args) -> None:
 
 
 def _view(args) -> None:
-    from hamsa.eigen import eigenbasis
-    from hamsa.viz import to_html
+    from hamsa.viz import map_to_html, to_html
 
-    output = _output_path(args, ".html", args.mesh, _potential_file(args.potential))
+    inputs = (
+        args.mesh,
+        _potential_file(args.potential),
+        args.basis,
+        args.modes,
+        args.map,
+        args.target,
+        *(args.field or ()),
+    )
+    output = _output_path(args, ".html", *inputs)
+    if (args.map is None) != (args.target is None):
+        raise HamsaError("--map and --target go together (the map's target mesh)")
+    if args.potential and (args.basis or args.field or args.modes or args.map):
+        raise HamsaError(
+            "--potential is for the eigenfunctions view computed here (not with --basis/--field/--modes/--map)"
+        )
     shape = _load_for_operators(args.mesh, args.repair)
-    mesh = shape.mesh
-    potential = _potential(args.potential, shape)
-    basis = eigenbasis(mesh, args.k, potential)
-    fields = {} if potential is None else {"potential V": potential}
-    fields |= {f"psi{i + 1} (E = {value:.4g})": basis.vectors[:, i] for i, value in enumerate(basis.values)}
-    kind = "LBO" if potential is None else "Hamiltonian"
-    to_html(mesh, fields, output, cmap="RdBu", symmetric=potential is None, title=f"{Path(args.mesh).name}: {kind}")
+    if args.map:
+        target = _load_for_operators(args.target, args.repair)
+        mapping = _load_ids(args.map)
+        if shape.vertex_ids is not None or target.vertex_ids is not None:
+            raise HamsaError("--map shows a map between the meshes as given: leave out --repair")
+        map_to_html(shape.mesh, target.mesh, mapping, output, title=f"{Path(args.map).name}: {Path(args.mesh).name} -> "
+                    f"{Path(args.target).name}")  # fmt: skip
+        print(f"wrote {output} (the map in colours; open it in a browser)")
+        return
+    fields, kind = _view_fields(args, shape)
+    to_html(shape.mesh, fields, output, title=f"{Path(args.mesh).name}: {kind}")
     print(f"wrote {output} ({len(fields)} fields; open it in a browser)")
+
+
+def _view_fields(args, shape: _Loaded) -> tuple[dict, str]:
+    """The fields ``hamsa view`` shows ({title: (n,) array}) and what they are. Eigenfunctions are titled by
+    their column in ``basis.vectors`` (0-based, as in Python); a constant first one is left out unless
+    ``--constant``."""
+    from hamsa.eigen import Eigenbasis, eigenbasis
+    from hamsa.files import load_array, load_npz
+
+    n = shape.mesh.n_vertices
+    if args.field:
+        fields = {}
+        for path in args.field:
+            values = load_array(path, ndim=(1, 2), rows=n)
+            columns = values.reshape(n, -1)
+            fields |= {Path(path).stem + ("" if values.ndim == 1 else f"[:, {j}]"): c for j, c in enumerate(columns.T)}
+        return fields, "fields"
+    if args.modes:
+        archive = load_npz(args.modes, {"modes": {"ndim": 2}})
+        if "modes" not in archive:
+            raise HamsaError(f"'{args.modes}' has no 'modes' array (write it with hamsa modes)")
+        modes = archive["modes"]
+        if modes.shape[0] != n:
+            raise HamsaError(f"'{args.modes}': modes of shape {modes.shape}, the mesh has {n} vertices{_REPAIR_HINT}")
+        return {f"mode {j}": modes[:, j] for j in range(min(args.k, modes.shape[1]))}, "compressed modes"
+    potential = _potential(args.potential, shape)
+    if args.basis:
+        basis = Eigenbasis.load(args.basis)
+        same_ids = basis.vertex_ids is None or (
+            shape.vertex_ids is not None and np.array_equal(basis.vertex_ids, shape.vertex_ids)
+        )
+        if basis.n != n or not same_ids:
+            raise HamsaError(f"'{args.basis}' has {basis.n} rows, not those of the mesh's {n} vertices{_REPAIR_HINT}")
+        kind = f"basis {Path(args.basis).name}"
+    else:
+        basis = eigenbasis(shape.mesh, args.k + 1, potential)  # one more: the constant is skipped
+        kind = "LBO" if potential is None else "Hamiltonian"
+    vectors, first = basis.vectors, 0
+    if not args.constant and np.ptp(vectors[:, 0]) <= 1e-8 * np.abs(vectors[:, 0]).max():
+        first = 1  # the constant eigenfunction of V = 0 (Neumann): nothing to see
+    fields = {} if potential is None else {"potential V": potential}
+    chosen = range(first, min(first + args.k, basis.k))
+    fields |= {f"psi {i} (E = {basis.values[i]:.4g})": vectors[:, i] for i in chosen}
+    return fields, kind
+
+
+_REPAIR_HINT = " (computed with --repair? then pass --repair here too)"
 
 
 def _reproduce(args) -> None:

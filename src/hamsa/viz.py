@@ -196,7 +196,7 @@ def _is_pair(value) -> bool:
 
 
 def to_html(
-    mesh, fields, path, *, titles=None, cmap: str = "Viridis", symmetric: bool = False, title: str = ""
+    mesh, fields, path, *, titles=None, cmap: str | None = None, symmetric: bool | None = None, title: str = ""
 ) -> None:
     """Write a self-contained interactive page: rotate / zoom the mesh, switch fields, read the colorbar.
 
@@ -208,17 +208,109 @@ def to_html(
     fields : (n,) array, a sequence of them, or a dict {name: (n,) array}; one button per field
     path : str or Path of the .html file (written atomically)
     titles : names of the fields (when ``fields`` is not a dict)
-    cmap : a plotly colorscale name ("Viridis", "RdBu", "Inferno", ...)
-    symmetric : color range symmetric about 0 (eigenfunctions)
+    cmap : a plotly colorscale name ("Viridis", "RdBu", "Inferno", ...); default per field: a diverging
+        "RdBu" for a field of both signs (an eigenfunction), "Viridis" for one of one sign (a potential)
+    symmetric : color range symmetric about 0; default per field: for those of both signs
     title : the page's heading
     """
+    go = _plotly()
+    from hamsa.files import atomic_write
+
+    mesh = as_shape(mesh)
+    titles, fields = _named_fields(mesh, fields, titles)
+
+    def style(field):
+        signed = bool(field.min() < 0 < field.max())
+        centred = signed if symmetric is None else symmetric
+        if centred:
+            bound = float(np.abs(field).max()) or 1.0
+            low, high = -bound, bound
+        else:
+            low, high = float(field.min()), float(field.max())
+            low, high = (low, high) if high > low else (low - 1.0, high + 1.0)
+        return {"cmin": low, "cmax": high, "colorscale": cmap or ("RdBu_r" if signed else "Viridis")}
+
+    first = style(fields[0])
+    colorbar = {"title": {"text": titles[0]}}
+    if isinstance(mesh, PointCloud):
+        trace = _points_trace(go, mesh, marker={"size": 2, "color": fields[0], "colorbar": colorbar, **first})
+        prefix, values = "marker.", "marker.color"
+    else:
+        trace = _mesh_trace(go, mesh, intensity=fields[0], intensitymode="vertex", colorbar=colorbar, **first)
+        prefix, values = "", "intensity"
+    figure = go.Figure(trace)
+    buttons = []
+    for name, field in zip(titles, fields):
+        restyle = {values: [field], f"{prefix}colorbar.title.text": name}
+        restyle |= {f"{prefix}{key}": [value] if key == "colorscale" else value for key, value in style(field).items()}
+        buttons.append({"label": name, "method": "restyle", "args": [restyle]})
+    figure.update_layout(
+        title=title,
+        scene=_SCENE,
+        updatemenus=[{"buttons": buttons, "direction": "down", "x": 0.0, "y": 1.0, "xanchor": "left"}]
+        if len(fields) > 1 else [],
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+    )  # fmt: skip
+    with atomic_write(path, "w") as handle:
+        handle.write(figure.to_html(include_plotlyjs=True, full_html=True))
+
+
+def map_to_html(source, target, map_source_to_target, path, *, title: str = "") -> None:
+    """Write a self-contained page with the two shapes side by side, the target coloured by its position
+    (red, green, blue = its x, y, z scaled to [0, 1]) and each source vertex by the colour of its image:
+    a correct map shows the same colours at corresponding places, a mirror or a swap shows at a glance.
+    Source vertices mapped to -1 (unknown) are grey.
+
+    Parameters
+    ----------
+    source, target : TriMesh, (vertices, faces) or PointCloud
+    map_source_to_target : (n_source,) target vertex ids (-1: none)
+    path : the .html file (written atomically; plotly.js embedded, opens offline)
+    """
+    go = _plotly()
+    from plotly.subplots import make_subplots
+
+    from hamsa.files import atomic_write
+
+    source, target = as_shape(source), as_shape(target)
+    mapping = np.asarray(map_source_to_target)
+    if mapping.shape != (source.n_vertices,) or not np.issubdtype(mapping.dtype, np.integer):
+        raise HamsaError(
+            f"the map must be ({source.n_vertices},) integer target ids, got {mapping.dtype} {mapping.shape}"
+        )
+    if mapping.size and (mapping.min() < -1 or mapping.max() >= target.n_vertices):
+        raise HamsaError(f"the map holds ids outside -1..{target.n_vertices - 1} (target vertices)")
+    low, high = target.vertices.min(axis=0), target.vertices.max(axis=0)
+    rgb = (target.vertices - low) / np.where(high > low, high - low, 1.0)
+    pulled = np.where(mapping[:, None] >= 0, rgb[np.maximum(mapping, 0)], 0.6)
+    figure = make_subplots(rows=1, cols=2, specs=[[{"type": "scene"}, {"type": "scene"}]],
+                           subplot_titles=("source (colours of its images)", "target"))  # fmt: skip
+    for column, (shape, colors) in enumerate(((source, pulled), (target, rgb)), 1):
+        css = [f"rgb({r},{g},{b})" for r, g, b in np.round(255 * colors).astype(int)]
+        if isinstance(shape, PointCloud):
+            trace = _points_trace(go, shape, marker={"size": 2, "color": css})
+        else:
+            trace = _mesh_trace(go, shape, vertexcolor=css)
+        figure.add_trace(trace, row=1, col=column)
+    figure.update_layout(title=title, scene=_SCENE, scene2=_SCENE, margin={"l": 0, "r": 0, "t": 60, "b": 0})
+    with atomic_write(path, "w") as handle:
+        handle.write(figure.to_html(include_plotlyjs=True, full_html=True))
+
+
+_SCENE = {"aspectmode": "data", "xaxis": {"visible": False}, "yaxis": {"visible": False},
+          "zaxis": {"visible": False}, "camera": {"eye": {"x": 1.5, "y": 1.5, "z": 1.2}}}  # fmt: skip
+
+
+def _plotly():
     try:
         import plotly.graph_objects as go
     except ImportError:
         raise MissingDependencyError("interactive views need plotly: pip install 'hamsa[viz]'") from None
-    from hamsa.files import atomic_write
+    return go
 
-    mesh = as_shape(mesh)
+
+def _named_fields(mesh, fields, titles) -> tuple[list[str], list[np.ndarray]]:
+    """(titles, fields) from a dict, a sequence or one array, each field checked to be finite (n,)."""
     if isinstance(fields, dict):
         titles, fields = list(fields), list(fields.values())
     elif np.ndim(fields) == 1:
@@ -230,44 +322,16 @@ def to_html(
     for name, field in zip(titles, fields):
         if field.shape != (mesh.n_vertices,) or not np.all(np.isfinite(field)):
             raise HamsaError(f"field '{name}' must be a finite ({mesh.n_vertices},) array, got shape {field.shape}")
+    return titles, fields
 
-    def color_range(field):
-        if symmetric:
-            bound = float(np.abs(field).max()) or 1.0
-            return -bound, bound
-        low, high = float(field.min()), float(field.max())
-        return (low, high) if high > low else (low - 1.0, high + 1.0)
 
+def _mesh_trace(go, mesh, **style):
     x, y, z = mesh.vertices.T
-    low, high = color_range(fields[0])
-    colorbar = {"title": {"text": titles[0]}}
-    if isinstance(mesh, PointCloud):
-        trace = go.Scatter3d(
-            x=x, y=y, z=z, mode="markers",
-            marker={"size": 2, "color": fields[0], "colorscale": cmap, "cmin": low, "cmax": high, "colorbar": colorbar},
-        )  # fmt: skip
-        prefix, values = "marker.", "marker.color"
-    else:
-        i, j, k = mesh.faces.T
-        trace = go.Mesh3d(
-            x=x, y=y, z=z, i=i, j=j, k=k,
-            intensity=fields[0], intensitymode="vertex", colorscale=cmap, cmin=low, cmax=high,
-            colorbar=colorbar, flatshading=False, lighting={"ambient": 0.5, "diffuse": 0.7, "specular": 0.1},
-        )  # fmt: skip
-        prefix, values = "", "intensity"
-    figure = go.Figure(trace)
-    buttons = []
-    for name, field in zip(titles, fields):
-        low, high = color_range(field)
-        restyle = {values: [field], f"{prefix}cmin": low, f"{prefix}cmax": high, f"{prefix}colorbar.title.text": name}
-        buttons.append({"label": name, "method": "restyle", "args": [restyle]})
-    figure.update_layout(
-        title=title,
-        scene={"aspectmode": "data", "xaxis": {"visible": False}, "yaxis": {"visible": False},
-               "zaxis": {"visible": False}, "camera": {"eye": {"x": 1.5, "y": 1.5, "z": 1.2}}},
-        updatemenus=[{"buttons": buttons, "direction": "down", "x": 0.0, "y": 1.0, "xanchor": "left"}]
-        if len(fields) > 1 else [],
-        margin={"l": 0, "r": 0, "t": 40, "b": 0},
-    )  # fmt: skip
-    with atomic_write(path, "w") as handle:
-        handle.write(figure.to_html(include_plotlyjs=True, full_html=True))
+    i, j, k = mesh.faces.T
+    lighting = {"ambient": 0.5, "diffuse": 0.7, "specular": 0.1}
+    return go.Mesh3d(x=x, y=y, z=z, i=i, j=j, k=k, flatshading=False, lighting=lighting, **style)
+
+
+def _points_trace(go, cloud, marker):
+    x, y, z = cloud.vertices.T
+    return go.Scatter3d(x=x, y=y, z=z, mode="markers", marker=marker)
