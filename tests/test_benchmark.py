@@ -1,6 +1,7 @@
 """Dataset-wide matching benchmarks: pairs in parallel, resumable, one table (on the built-in pose family)."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -121,12 +122,17 @@ def test_texture_and_landmark_feature_methods_on_a_pose_pair(pose_dataset):
 
 
 def test_dataset_benchmark_on_a_dask_cluster_equals_the_local_run(pose_dataset, tmp_path):
-    """The pairs run on a Dask cluster given its scheduler address (here an in-process LocalCluster) and
-    score exactly as in local worker processes."""
+    """The pairs run on a Dask cluster given its scheduler address — a scheduler and two worker processes
+    talking over TCP on localhost, as a real cluster does — and score exactly as in local worker processes."""
     distributed = pytest.importorskip("distributed", reason="the Dask path needs the [dask] extra")
     dataset = load_folder(pose_dataset)
     local = benchmark_dataset(dataset, tmp_path / "local", methods=("hks",), k=30, points=200, progress=False)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as c:
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://", host="127.0.0.1", dashboard_address=None
+    )
+    with cluster as c, distributed.Client(c.scheduler_address) as client:
+        assert c.scheduler_address.startswith("tcp://127.0.0.1:")
+        assert len(set(client.run(os.getpid).values()) - {os.getpid()}) == 2  # two processes, not this one
         remote = benchmark_dataset(
             dataset,
             tmp_path / "dask",
