@@ -47,6 +47,28 @@ def require_rendering() -> None:
         pytest.skip(_RENDERING[0])
 
 
+def chromium() -> str:
+    """The headless Chromium binary, or skip the calling test saying how to get one."""
+    import shutil
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("headless Chromium is not installed (make test installs Debian's chromium)")
+    return browser
+
+
+def screenshot(page: Path, shot: Path) -> np.ndarray:
+    """Open ``page`` in headless Chromium (WebGL in software) and return its 800 x 600 screenshot, RGB ints."""
+    import subprocess
+
+    from PIL import Image
+
+    flags = "--headless --no-sandbox --disable-gpu --enable-unsafe-swiftshader --disable-background-networking"
+    command = [chromium(), *flags.split(), "--no-first-run", "--window-size=800,600", "--virtual-time-budget=8000"]
+    subprocess.run([*command, f"--screenshot={shot}", page.as_uri()], capture_output=True, timeout=120, check=True)
+    return np.asarray(Image.open(shot).convert("RGB")).astype(int)
+
+
 def data_mesh(relative: str) -> hamsa.TriMesh:
     return hamsa.load_mesh(DATA / relative)
 

@@ -3,7 +3,7 @@ import pytest
 
 from hamsa import shapes
 
-from conftest import require_rendering
+from conftest import require_rendering, screenshot
 
 
 @pytest.fixture(autouse=True)
@@ -39,21 +39,8 @@ def test_render_refuses_mismatched_fields(tmp_path):
         viz.render_fields(shapes.icosphere(1), [np.zeros(5)], tmp_path / "x.png")
 
 
-def _chromium():
-    import shutil
-
-    browser = shutil.which("chromium") or shutil.which("chromium-browser")
-    if browser is None:
-        pytest.skip("headless Chromium is not installed (make test installs Debian's chromium)")
-    return browser
-
-
 def test_interactive_page_shows_the_mesh_in_a_headless_browser(tmp_path):
     """Open the page as a person would (Chromium, WebGL in software) and look at the screenshot."""
-    import subprocess
-
-    from PIL import Image
-
     import hamsa
     from hamsa.viz import to_html
 
@@ -64,25 +51,10 @@ def test_interactive_page_shows_the_mesh_in_a_headless_browser(tmp_path):
     to_html(mesh, {f"phi{i}": basis.vectors[:, i] for i in (1, 2, 3)}, page, symmetric=True, cmap="RdBu")
     html = page.read_text()
     assert "phi1" in html and "phi3" in html and "<script src=" not in html  # buttons; plotly.js embedded
-    shot = tmp_path / "shot.png"
-    flags = "--headless --no-sandbox --disable-gpu --enable-unsafe-swiftshader --disable-background-networking"
-    command = [_chromium(), *flags.split(), "--no-first-run", "--window-size=800,600", "--virtual-time-budget=8000"]
-    subprocess.run([*command, f"--screenshot={shot}", page.as_uri()], capture_output=True, timeout=120, check=True)
-    pixels = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    pixels = screenshot(page, tmp_path / "shot.png")
     middle = pixels[100:500, 150:650]
     saturated = (middle.max(axis=2) - middle.min(axis=2)) > 60  # red/blue shading of the field, not UI gray
     assert saturated.mean() > 0.05, f"only {saturated.mean():.1%} colored pixels: the mesh is not visible"
-
-
-def _screenshot(page, shot):
-    import subprocess
-
-    from PIL import Image
-
-    flags = "--headless --no-sandbox --disable-gpu --enable-unsafe-swiftshader --disable-background-networking"
-    command = [_chromium(), *flags.split(), "--no-first-run", "--window-size=800,600", "--virtual-time-budget=8000"]
-    subprocess.run([*command, f"--screenshot={shot}", page.as_uri()], capture_output=True, timeout=120, check=True)
-    return np.asarray(Image.open(shot).convert("RGB")).astype(int)
 
 
 def test_a_map_page_shows_both_shapes_in_the_colours_of_the_correspondence(tmp_path):
@@ -101,7 +73,7 @@ def test_a_map_page_shows_both_shapes_in_the_colours_of_the_correspondence(tmp_p
     assert main(command + [str(tmp_path / "walk.off"), "-o", str(page)]) == 0
     html = page.read_text()
     assert "scene2" in html and "vertexcolor" in html and "source (colours of its images)" in html
-    pixels = _screenshot(page, tmp_path / "shot.png")
+    pixels = screenshot(page, tmp_path / "shot.png")
     colored = (pixels.max(axis=2) - pixels.min(axis=2)) > 60
     left, right = colored[80:560, :400].mean(), colored[80:560, 400:].mean()
     assert left > 0.02 and right > 0.02, (left, right)
