@@ -147,6 +147,15 @@ def test_report_has_every_claim_measured_and_at_least_ten_figures(report):
     assert page.count("<img ") >= 10 and "Claims checklist" in page and "http" not in page.split("</style>")[1]
 
 
+def test_report_tables_are_labelled_and_say_which_data_each_experiment_used(report):
+    folder, _ = report
+    page = (folder / "index.html").read_text()
+    assert "<caption>methods</caption>" in page and "<td>hks · lbo</td>" in page  # fig10: methods x bases
+    assert "methods.hks.lbo.auc" not in page  # no raw key paths
+    assert page.count("<b>Data in this run:</b> built-in humanoid") >= 4  # fig2-5 captions name the centaur etc.
+    assert "<b>Data in this run:</b> built-in capsule" in page  # fig8: not Fandisk without --data
+
+
 def test_killed_run_resumes_without_redoing_finished_experiments(tmp_path):
     """SIGKILL after the first experiment finished: the re-run takes it from the cache, runs the rest."""
     import os

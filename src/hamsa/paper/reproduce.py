@@ -181,24 +181,70 @@ _STYLE = """
 body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #ccc;padding:.25em .6em;
 text-align:left;vertical-align:top;font-size:.9em}th{background:#f3f3f3}img{max-width:100%;border:1px solid #ddd}
+caption{text-align:left;font-weight:bold;padding:.2em 0}
 .reproduced{background:#e3f6e3}.not-reproduced{background:#fde2e2}.not-applicable,.not-run{background:#eee}
 pre{background:#f7f7f7;padding:.5em;overflow:auto;font-size:.8em}code{font-size:.9em}
 """
 
 
-def _scalars(numbers, prefix=""):
-    """(key, value) rows of the numbers worth a table: scalars and short lists, nested keys dotted."""
-    rows = []
-    for key, value in (numbers or {}).items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            rows += _scalars(value, name + ".")
+def _is_scalar(value) -> bool:
+    return isinstance(value, (int, float, bool, str)) or value is None
+
+
+def _records(value, label: str = "") -> list[tuple[str, dict]] | None:
+    """A dict nesting down to dicts of scalars with the same keys, or a list of such dicts, as labelled rows
+    ("hks · lbo", {"auc": ...}); None when it is not that shape."""
+    if isinstance(value, list):
+        rows = [(f"{label}{i}", v) for i, v in enumerate(value)]
+    elif isinstance(value, dict) and value and all(_is_scalar(v) for v in value.values()):
+        return [(label.removesuffix(" · "), value)] if label else None
+    elif isinstance(value, dict) and value:
+        rows = []
+        for key, inner in value.items():
+            found = _records(inner, f"{label}{key} · ")
+            if found is None:
+                return None
+            rows += found
+    else:
+        return None
+    if not rows or not all(isinstance(r, dict) and r and all(map(_is_scalar, r.values())) for _, r in rows):
+        return None
+    return rows if len({tuple(r) for _, r in rows}) == 1 else None
+
+
+def _tables(numbers: dict) -> list[tuple[str, list[str], list[list[str]]]]:
+    """The numbers as labelled tables: (caption, header, rows). Scalars and short lists go in one
+    quantity / value table; a nesting of records (methods x bases x scores, per-pair rows) gets a table of
+    its own with one column per score."""
+    plain, tables = [], []
+
+    def walk(value, name):
+        rows = None if isinstance(value, list) and all(map(_is_scalar, value)) else _records(value)
+        if rows is not None:
+            header = list(rows[0][1])
+            labelled = isinstance(value, dict)  # list rows carry their own labels (source, method, ...)
+            cells = [([label] if labelled else []) + [_format(r[h]) for h in header] for label, r in rows]
+            tables.append((name, ["", *header] if labelled else header, cells))
+        elif isinstance(value, dict):
+            for key, inner in value.items():
+                walk(inner, f"{name}.{key}" if name else key)
         elif isinstance(value, list):
-            if len(value) <= 8 and all(isinstance(v, (int, float, bool, str)) or v is None for v in value):
-                rows.append((name, ", ".join(_format(v) for v in value)))
+            if len(value) <= 8 and all(map(_is_scalar, value)):
+                plain.append([name, ", ".join(_format(v) for v in value)])
         else:
-            rows.append((name, _format(value)))
-    return rows
+            plain.append([name, _format(value)])
+
+    walk(numbers or {}, "")
+    return [("", ["quantity", "value"], plain), *tables] if plain else tables
+
+
+def _data_used(numbers: dict) -> str | None:
+    """The shapes an experiment ran on, from its numbers (its caption describes the data it can use)."""
+    for key in ("mesh", "dataset"):
+        if isinstance((numbers or {}).get(key), str):
+            return numbers[key]
+    meshes = sorted({r["mesh"] for r in (numbers or {}).get("rows", []) if isinstance(r, dict) and "mesh" in r})
+    return ", ".join(meshes) or None
 
 
 def _format(value) -> str:
@@ -253,9 +299,13 @@ def report_html(results: dict, records: dict, output: Path) -> str:
             if name.endswith(".png"):
                 encoded = base64.b64encode((output / name).read_bytes()).decode()
                 parts.append(f"<p><img alt='{e(name)}' src='data:image/png;base64,{encoded}'></p>")
-        parts.append(f"<p>{record['seconds']} s{' (cached)' if record['cached'] else ''}</p>")
-        parts.append("<table><tr><th>quantity</th><th>value</th></tr>")
-        parts += [f"<tr><td>{e(k)}</td><td>{e(v)}</td></tr>" for k, v in _scalars(record["numbers"])]
-        parts.append("</table>")
+        used = _data_used(record["numbers"])
+        parts.append(f"<p>{f'<b>Data in this run:</b> {e(used)}. ' if used else ''}"
+                     f"{record['seconds']} s{' (cached)' if record['cached'] else ''}</p>")  # fmt: skip
+        for caption, header, rows in _tables(record["numbers"]):
+            parts.append(f"<table>{f'<caption>{e(caption)}</caption>' if caption else ''}<tr>")
+            parts += [f"<th>{e(h)}</th>" for h in header] + ["</tr>"]
+            parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in rows]
+            parts.append("</table>")
     parts.append("</body></html>")
     return "\n".join(parts)

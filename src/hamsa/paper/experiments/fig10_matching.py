@@ -105,11 +105,17 @@ def run(args) -> MatchingResult:
 
 
 def _plot_curves(path, curves, mean, dataset):
-    figure, axes = plt.subplots(1, len(METHODS), figsize=(4.2 * len(METHODS), 3.6), sharey=True)
+    columns = 3
+    rows = -(-len(METHODS) // columns)
+    figure, grid = plt.subplots(rows, columns, figsize=(4.4 * columns, 3.8 * rows), sharey=True, squeeze=False)
+    axes = grid.ravel()
     for ax, method in zip(axes, METHODS):
         aucs = {basis: getattr(mean[method], basis).auc for basis in BASES}
         kim_curve_panel(ax, curves[method], aucs, f"{method} — {dataset}\n(oracle potentials, as the paper)")
-    axes[0].set_ylabel("% correspondences")
+    for ax in axes[len(METHODS) :]:
+        ax.set_axis_off()
+    for ax in grid[:, 0]:
+        ax.set_ylabel("% correspondences")
     figure.tight_layout()
     save_figure(figure, path)
     plt.close(figure)

@@ -1,4 +1,4 @@
-"""Paper §5 (Fig. dalmatian): a photometric texture as the potential, on the TOSCA dogs.
+"""Paper §5 (Fig. dalmatian): a texture as the potential (the TOSCA dogs with --data, else humanoid poses).
 
 The dogs come without texture, so we paint one : :func:`hamsa.potentials.dalmatian_texture`
 puts seeded black geodesic spots on the first dog, and the ground truth (shared vertex indexing) carries

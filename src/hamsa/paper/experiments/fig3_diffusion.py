@@ -1,4 +1,4 @@
-"""Fig. 3: heat diffusion from a point on the centaur's head, LBO vs Hamiltonian.
+"""Fig. 3: heat diffusion from a point on the head (TOSCA centaur0 with --data, else the built-in humanoid), LBO vs H.
 
 The Hamiltonian's potential is mu times the geodesic distance from the tip of the front-left leg
 (Kim et al. landmarks 1 "top of head" and 5 "tip of front left leg"), normalized to [0, 1], with

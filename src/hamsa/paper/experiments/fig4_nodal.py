@@ -1,4 +1,4 @@
-"""Fig. 4: nodal domains of eigenfunctions under two potentials, and Courant's theorem.
+"""Fig. 4: nodal domains under two potentials and Courant's theorem (TOSCA dog0 with --data, else the humanoid).
 
 For the LBO and two Hamiltonians (a step potential on one half of the shape, and the normalized
 geodesic distance from one extremity, both scaled by lambda_10 of the LBO), the nodal domains of

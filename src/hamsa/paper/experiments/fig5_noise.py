@@ -1,4 +1,4 @@
-"""Fig. 5: robustness of the Hamiltonian eigenbasis to geometric, potential and topological noise.
+"""Fig. 5: robustness to geometric, potential and topological noise (TOSCA michael1 with --data, else the humanoid).
 
 A Hamiltonian with a smooth potential (mu times the normalized geodesic distance from one
 extremity, mu = lambda_10 of the LBO) is computed on the clean shape and on three perturbed ones:

@@ -1,4 +1,4 @@
-"""Paper Fig. compression_Res: rate-distortion of spectral geometry compression on Fandisk.
+"""Paper Fig. compression_Res: rate-distortion of spectral compression (Fandisk with --data, else a capsule).
 
 For several coefficient counts (12 bits per coefficient), three bases: MHB (combinatorial Laplacian,
 Karni-Gotsman 2000), H (vertices reordered by the optimized potential, the decoder's potential the
