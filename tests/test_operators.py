@@ -3,7 +3,7 @@ import pytest
 import scipy.sparse as sp
 
 import hamsa
-from hamsa import PotentialError, shapes
+from hamsa import HamsaError, PotentialError, shapes
 from hamsa.operators import hamiltonian, mass_matrix, potential_mass_matrix, stiffness_matrix, vertex_areas
 
 from conftest import data_mesh
@@ -126,3 +126,22 @@ def test_absurd_potential_magnitudes_are_refused_not_silently_rounded():
     with pytest.raises(PotentialError, match="round-off"):
         hamiltonian(mesh, np.full(mesh.n_vertices, 1e300))
     hamiltonian(mesh, np.full(mesh.n_vertices, 1e6))  # an 'infinite wall' far above the spectrum is fine
+
+
+def test_divergence_of_the_gradient_is_minus_the_stiffness():
+    """The weak divergence is minus the area-weighted transpose of the P1 gradient: div(grad f) = -W f for
+    every f, and the divergence of a constant field integrates to zero on a closed surface."""
+    from hamsa.operators import divergence, divergence_matrix, face_gradients
+
+    mesh = shapes.humanoid(spacing=0.05)
+    f = np.random.default_rng(3).standard_normal((mesh.n_vertices, 2))
+    W = stiffness_matrix(mesh)
+    gradients = face_gradients(mesh, f)  # (m, 3, 2)
+    for j in range(2):
+        np.testing.assert_allclose(divergence(mesh, gradients[:, :, j]), -W @ f[:, j], atol=1e-12 * np.abs(W @ f).max())
+    G = face_gradients(mesh, np.eye(mesh.n_vertices)[:, :50])  # columns of the gradient matrix
+    D = divergence_matrix(mesh)[:50].toarray().reshape(50, mesh.n_faces, 3)
+    np.testing.assert_allclose(D, -np.einsum("m,mdi->imd", mesh.face_areas, G), atol=1e-12)
+    assert abs(divergence(mesh, np.tile([0.3, -1.0, 2.0], (mesh.n_faces, 1))).sum()) < 1e-10
+    with pytest.raises(HamsaError, match="per-face vector field"):
+        divergence(mesh, np.zeros((mesh.n_vertices, 3)))

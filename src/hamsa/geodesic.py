@@ -16,33 +16,12 @@ point-cloud heat solver, the ``[pointcloud]`` extra): :class:`PointCloudGeodesic
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from hamsa.errors import HamsaError, MissingDependencyError
 from hamsa.factorization import CholeskySolver
 from hamsa.mesh import as_trimesh
-from hamsa.operators import mass_matrix, stiffness_matrix
+from hamsa.operators import divergence_matrix, face_gradients, mass_matrix, stiffness_matrix
 from hamsa.pointcloud import PointCloud, as_shape
-
-
-def face_gradients(mesh, f: np.ndarray) -> np.ndarray:
-    """Per-face gradient of a P1 function: ``sum_v f_v (N x e_v) / (2 area)``, shape (m, 3) (or (m, 3, d)).
-
-    e_v is the edge opposite vertex v, oriented along the face, N the unit face normal.
-    """
-    mesh = as_trimesh(mesh)
-    v, faces = mesh.vertices, mesh.faces
-    p = [v[faces[:, c]] for c in range(3)]
-    normal = np.cross(p[1] - p[0], p[2] - p[0])
-    double_area = np.linalg.norm(normal, axis=1)
-    normal /= double_area[:, None]
-    grad = 0.0
-    for c in range(3):
-        edge = p[(c + 2) % 3] - p[(c + 1) % 3]
-        rotated = np.cross(normal, edge) / double_area[:, None]
-        values = f[faces[:, c]]
-        grad = grad + (rotated * values[:, None] if values.ndim == 1 else rotated[:, :, None] * values[:, None, :])
-    return grad
 
 
 class GeodesicSolver:
@@ -68,7 +47,7 @@ class GeodesicSolver:
             (W + 1e-10 * W.diagonal().mean() / self._mass.diagonal().mean() * self._mass).tocsc()
         )
         self._components = self.mesh.vertex_components[1]
-        self._divergence_operators = self._divergence_matrices(self.mesh)
+        self._divergence = divergence_matrix(self.mesh)
 
     def distance(self, sources, *, normalize: bool = False, unreachable=np.inf) -> np.ndarray:
         """(n,) distances from the nearest of ``sources`` (vertex indices), 0 at the sources; ``normalize``
@@ -104,28 +83,7 @@ class GeodesicSolver:
         grad = face_gradients(self.mesh, u)  # (m, 3) or (m, 3, s)
         norm = np.linalg.norm(grad, axis=1, keepdims=True)
         X = -grad / np.where(norm > 0, norm, 1.0)
-        divergence = sum(self._divergence_operators[d] @ X[:, d] for d in range(3))
-        return self._poisson.solve(-divergence)
-
-    @staticmethod
-    def _divergence_matrices(mesh) -> list:
-        """Sparse (n, m) operators D_x, D_y, D_z with integrated divergence = sum_d D_d X[:, d]:
-        at a corner i of a face, ``1/2 (cot_k (e1 . X) + cot_j (e2 . X))`` with e1, e2 the edges from i."""
-        faces = mesh.faces
-        p = [mesh.vertices[faces[:, c]] for c in range(3)]
-        n, m = mesh.n_vertices, mesh.n_faces
-        rows, weights = [], []
-        for c in range(3):
-            i, j, k = c, (c + 1) % 3, (c + 2) % 3
-            e1, e2 = p[j] - p[i], p[k] - p[i]
-            cot_k = _cot(p[i] - p[k], p[j] - p[k])  # the angle opposite e1
-            cot_j = _cot(p[i] - p[j], p[k] - p[j])  # the angle opposite e2
-            rows.append(faces[:, i])
-            weights.append(0.5 * (cot_k[:, None] * e1 + cot_j[:, None] * e2))
-        rows = np.concatenate(rows)
-        columns = np.tile(np.arange(m), 3)
-        weights = np.concatenate(weights)
-        return [sp.csr_matrix((weights[:, d], (rows, columns)), shape=(n, m)) for d in range(3)]
+        return self._poisson.solve(-(self._divergence @ X.reshape(3 * len(X), -1)).reshape(u.shape))
 
 
 class PointCloudGeodesicSolver:
@@ -186,10 +144,6 @@ def _check_sources(sources, n: int) -> np.ndarray:
     if not np.issubdtype(index.dtype, np.integer) or index.min() < 0 or index.max() >= n:
         raise HamsaError(f"source vertices must be integers in [0, {n}), got {sources!r}")
     return index
-
-
-def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b) / np.linalg.norm(np.cross(a, b), axis=1)
 
 
 def geodesic_distance(mesh, sources, t: float | None = None, *, normalize: bool = False, unreachable=np.inf):

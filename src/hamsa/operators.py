@@ -170,6 +170,64 @@ MAX_POTENTIAL_RATIO = 1e12
 """Largest |V| accepted, relative to the mesh's largest Laplacian eigenvalue (float64 keeps ~16 digits)."""
 
 
+def face_gradients(mesh, f: np.ndarray) -> np.ndarray:
+    """Per-face gradient of a P1 function: ``sum_v f_v (N x e_v) / (2 area)``, shape (m, 3) (or (m, 3, d)
+    for an (n, d) f), in units of f per length.
+
+    e_v is the edge opposite vertex v, oriented along the face, N the unit face normal.
+    """
+    mesh = as_trimesh(mesh)
+    v, faces = mesh.vertices, mesh.faces
+    p = [v[faces[:, c]] for c in range(3)]
+    normal = np.cross(p[1] - p[0], p[2] - p[0])
+    double_area = np.linalg.norm(normal, axis=1)
+    normal /= double_area[:, None]
+    f = np.asarray(f, dtype=np.float64)
+    grad = 0.0
+    for c in range(3):
+        edge = p[(c + 2) % 3] - p[(c + 1) % 3]
+        rotated = np.cross(normal, edge) / double_area[:, None]
+        values = f[faces[:, c]]
+        grad = grad + (rotated * values[:, None] if values.ndim == 1 else rotated[:, :, None] * values[:, None, :])
+    return grad
+
+
+def divergence_matrix(mesh) -> sp.csr_matrix:
+    """The integrated divergence (n, 3m) of a per-face vector field X (m, 3), flattened face by face
+    (``X.reshape(-1)``): at a corner i of a face, ``1/2 (cot_k (e1 . X) + cot_j (e2 . X))`` with e1, e2
+    the edges from i and k, j the corners opposite them. It is minus the transpose of the gradient
+    weighted by the face areas, so ``divergence(mesh, face_gradients(mesh, f)) = -W f`` (the cotan
+    Laplacian of f, integrated over each vertex's cell)."""
+    mesh = as_trimesh(mesh)
+    faces = mesh.faces
+    p = [mesh.vertices[faces[:, c]] for c in range(3)]
+    n, m = mesh.n_vertices, mesh.n_faces
+    rows, columns, weights = [], [], []
+    for c in range(3):
+        i, j, k = c, (c + 1) % 3, (c + 2) % 3
+        e1, e2 = p[j] - p[i], p[k] - p[i]
+        cot_k = _cot(p[i] - p[k], p[j] - p[k])  # the angle opposite e1
+        cot_j = _cot(p[i] - p[j], p[k] - p[j])  # the angle opposite e2
+        weight = 0.5 * (cot_k[:, None] * e1 + cot_j[:, None] * e2)  # (m, 3)
+        rows.append(np.repeat(faces[:, i], 3))
+        columns.append(3 * np.repeat(np.arange(m), 3) + np.tile(np.arange(3), m))
+        weights.append(weight.ravel())
+    return sp.csr_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(columns))), shape=(n, 3 * m))
+
+
+def divergence(mesh, field: np.ndarray) -> np.ndarray:
+    """Integrated divergence (n,) of a per-face vector field (m, 3) (:func:`divergence_matrix`)."""
+    mesh = as_trimesh(mesh)
+    field = np.asarray(field, dtype=np.float64)
+    if field.shape != (mesh.n_faces, 3):
+        raise HamsaError(f"a per-face vector field must be ({mesh.n_faces}, 3), got {field.shape}")
+    return divergence_matrix(mesh) @ field.reshape(-1)
+
+
+def _cot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b) / np.linalg.norm(np.cross(a, b), axis=1)
+
+
 def check_potential(potential, n: int) -> np.ndarray:
     """Return ``potential`` as a finite float64 array of length n, or raise PotentialError."""
     try:

@@ -12,13 +12,14 @@ from hamsa.errors import HamsaError
 from hamsa.matching.icp import alternate, procrustes
 from hamsa.matching.nearest import nearest_in
 from hamsa.mesh import as_trimesh
+from hamsa.operators import face_gradients
 
 
 def spectral_gradient_fields(mesh, basis: Eigenbasis, k: int = 10) -> np.ndarray:
     """Pointwise inner products of eigenfunction gradients ``G_ij(x) = <grad psi_i, grad psi_j>(x)``, (n, k, k).
 
     Intrinsic, so for an isometry with functional map C they transform as ``G_t(T x) = C^T G_s(x) C``.
-    Per-face gradients of the P1 functions (:func:`hamsa.geodesic.face_gradients`), averaged to the vertices
+    Per-face gradients of the P1 functions (:func:`hamsa.operators.face_gradients`), averaged to the vertices
     with the face areas as weights, of the first k eigenfunctions; each gradient is divided by its L2 norm
     ``sqrt(psi_i^T W psi_i)`` so the entries are dimensionless (a zero-energy mode, the constant, is left
     as is: its gradient is zero).
@@ -28,8 +29,6 @@ def spectral_gradient_fields(mesh, basis: Eigenbasis, k: int = 10) -> np.ndarray
     HamsaError
         If the mesh and the basis have different vertex counts.
     """
-    from hamsa.geodesic import face_gradients
-
     mesh = as_trimesh(mesh)
     if mesh.n_vertices != basis.n:
         raise HamsaError(f"the mesh has {mesh.n_vertices} vertices, the basis {basis.n}")
