@@ -134,3 +134,23 @@ def test_cli_view_writes_a_self_contained_page(tmp_path):
     text = page.read_text()
     assert "psi4" in text and "<script src=" not in text
     assert main(["view", str(mesh_path), "-o", str(tmp_path / "view.png")]) == 2  # wrong suffix
+
+
+def test_basis_shows_its_steps_and_the_converged_pairs_on_a_terminal(tmp_path, capsys, monkeypatch):
+    """On a terminal the solve's line counts the converged eigenpairs (the solver's progress callback);
+    with --quiet, or when stderr is not a terminal, nothing is shown."""
+    path = tmp_path / "sphere.off"
+    hamsa.save_mesh(shapes.sphere(5000), path)
+    out = tmp_path / "b.npz"
+    calls = []
+    basis = hamsa.eigenbasis(hamsa.load_mesh(path), 30, progress=lambda c, k: calls.append((c, k)))
+    assert calls[-1] == (30, 30) and len(calls) > 2 and all(0 <= c <= k == 30 for c, k in calls)
+    assert basis.info.method == "krylov"
+    assert main(["basis", str(path), "-k", "30", "-o", str(out)]) == 0
+    assert "eigenpairs converged" not in capsys.readouterr().err  # not a terminal
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["basis", str(path), "-k", "30", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "solving for 30 eigenpairs of n = 5000" in err and "30/30 eigenpairs converged" in err
+    assert main(["basis", str(path), "-k", "30", "-q", "-o", str(out)]) == 0
+    assert "eigenpairs converged" not in capsys.readouterr().err

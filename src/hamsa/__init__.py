@@ -12,8 +12,8 @@ __version__ = "0.5.0"
 
 _SUBMODULES = (
     "cmm", "compression", "datasets", "diffusion", "errors", "evaluation", "files", "geodesic", "io", "matching",
-    "mesh", "nodal", "noise", "operators", "optimize", "paper", "pointcloud", "potentials", "repair", "shapes",
-    "theory", "viz",
+    "mesh", "nodal", "noise", "operators", "optimize", "paper", "pointcloud", "potentials", "repair", "runtime",
+    "shapes", "theory", "viz",
 )  # fmt: skip
 _NAMES = {
     "Eigenbasis": "hamsa.eigen",
@@ -34,6 +34,7 @@ _NAMES = {
     "mass_matrix": "hamsa.operators",
     "stiffness_matrix": "hamsa.operators",
     "optimize_potential": "hamsa.optimize",
+    "show_config": "hamsa.runtime",
 }
 
 
@@ -74,6 +75,7 @@ __all__ = [
     "pointcloud",
     "potentials",
     "repair",
+    "runtime",
     "theory",
     "viz",
     "HamsaError",
@@ -93,5 +95,6 @@ __all__ = [
     "optimize_potential",
     "save_mesh",
     "shapes",
+    "show_config",
     "stiffness_matrix",
 ]

@@ -335,6 +335,7 @@ def _parser() -> argparse.ArgumentParser:
         "--only", nargs="+", metavar="NAME", help="experiments to run (names or prefixes: fig2 fig7)"
     )
     reproduce.add_argument("-o", "--output", default="report", help="report folder (default: report)")
+    commands.add_parser("config", help="versions, the sparse factorization and BLAS in use, threads, GPU")
     demo = commands.add_parser("demo", help="the step-potential experiment (paper Fig. 2) on a built-in surface")
     demo.add_argument("-k", type=_positive_int, default=12, help="number of eigenpairs (default 12)")
     demo.add_argument("--height", type=float, help="step height V0 (default: the 8th LBO eigenvalue)")
@@ -352,14 +353,19 @@ class _Steps:
 
         quiet = getattr(args, "quiet", False) or not sys.stderr.isatty()
         self.bar = tqdm(total=total, disable=quiet, file=sys.stderr, leave=False,
-                        bar_format="{desc} ({n}/{total}, {elapsed})")  # fmt: skip
+                        bar_format="{desc} ({n}/{total}, {elapsed}){postfix}")  # fmt: skip
         self.started = False
 
     def __call__(self, name: str) -> None:
         if self.started:
             self.bar.update()
         self.started = True
+        self.bar.set_postfix_str("", refresh=False)
         self.bar.set_description_str(name)
+
+    def converged(self, count: int, k: int) -> None:
+        """An eigensolver's ``progress``: the current step's line ends with how many of k pairs converged."""
+        self.bar.set_postfix_str(f"{count}/{k} eigenpairs converged")
 
     def __enter__(self):
         return self
@@ -496,6 +502,7 @@ def _basis(args) -> None:
             laplacian=args.laplacian,
             device=args.device,
             boundary=boundary,
+            progress=step.converged,
         )
         solved = time.perf_counter()
         step(f"writing {output.name}")
@@ -713,14 +720,14 @@ def _match_bases(args, loaded, meshes, landmarks, k: int, step):
         lbo = []
         for side, mesh in zip(("source", "target"), meshes):
             step(f"{side} LBO eigenbasis (k = {k}, n = {mesh.n_vertices})")
-            lbo.append(eigenbasis(mesh, k))
+            lbo.append(eigenbasis(mesh, k, progress=step.converged))
         V, name = matching_potentials(*lbo, meshes=meshes), "matching potential"
     else:
         V, name = [None, None], "LBO"
     bases = []
     for side, mesh, potential in zip(("source", "target"), meshes, V):
         step(f"{side} {'LBO' if potential is None else 'Hamiltonian'} eigenbasis (k = {k}, n = {mesh.n_vertices})")
-        bases.append(eigenbasis(mesh, k, potential))
+        bases.append(eigenbasis(mesh, k, potential, progress=step.converged))
     return bases, name
 
 
@@ -949,6 +956,12 @@ def _demo(args) -> None:
     )
 
 
+def _config(args) -> None:
+    from hamsa.runtime import show_config
+
+    show_config()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code: 0, 2 for bad input (one line on stderr naming it), 3 when a
     solver did not converge, 130 on Ctrl-C, 1 for an operating-system error (e.g. disk full)."""
@@ -965,6 +978,7 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark-matching": _benchmark_matching,
         "reproduce": _reproduce,
         "demo": _demo,
+        "config": _config,
     }
     try:
         args = _parser().parse_args(argv)

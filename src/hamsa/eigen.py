@@ -334,6 +334,7 @@ def eigenbasis(
     laplacian: str | None = None,
     device: str = "cpu",
     boundary="neumann",
+    progress=None,
 ) -> Eigenbasis:
     """The k smallest eigenpairs of the Hamiltonian ``(W + A diag(V)) psi = E A psi`` on a mesh or point cloud.
 
@@ -372,6 +373,10 @@ def eigenbasis(
         boundary of a point cloud or a region cut out of the surface. The problem is solved on the other
         vertices and the eigenvectors extended by zero (every method). See
         :func:`hamsa.operators.dirichlet_vertices`.
+    progress : callable, optional
+        ``progress(converged, k)``: called as the Krylov solver checks its Ritz pairs (every few blocks:
+        how many of the k wanted pairs meet ``tol``), and with ``(k, k)`` when the solve is done (the
+        only call for the dense, Chebyshev and per-piece solves). For a progress bar on long solves.
 
     Returns
     -------
@@ -413,6 +418,7 @@ def eigenbasis(
         initial=initial[free] if restricted and initial is not None else initial,
         spectral_scale=4 * np.pi / float(A.sum()),
         device=device,
+        progress=progress,
     )
     vectors = free_vectors
     if restricted:
@@ -435,6 +441,7 @@ def generalized_eigsh(
     factor: CholeskySolver | None = None,
     max_cycles: int = 50,
     device: str = "cpu",
+    progress=None,
 ) -> tuple[np.ndarray, np.ndarray, SolveInfo]:
     """The k smallest eigenpairs of a sparse symmetric pencil ``H x = E A x`` with A positive definite.
 
@@ -453,7 +460,7 @@ def generalized_eigsh(
     max_cycles : int
         Thick restarts of the Krylov solver before it counts as stalled (it usually needs 2-5). A stalled
         solve falls back to a dense solve where that fits, else to ARPACK, and ``info.fallback`` says so.
-    method, tol, backend, initial, device
+    method, tol, backend, initial, device, progress
         As in :func:`eigenbasis`.
 
     Returns
@@ -486,7 +493,9 @@ def generalized_eigsh(
     if count > 1:
         options = dict(lower_bound=lower_bound, method=method, tol=tol, backend=backend, max_cycles=max_cycles,
                        device=device)  # fmt: skip
-        return _by_components(H, A, k, labels, initial, options)
+        values, vectors, info = _by_components(H, A, k, labels, initial, options)
+        _report(progress, k, k)
+        return values, vectors, info
     method = _resolve_method(method, device, n, k)
     if spectral_scale is None:
         spectral_scale = float(H.diagonal().mean() / A.diagonal().mean()) / n
@@ -501,12 +510,18 @@ def generalized_eigsh(
         try:
             values, vectors, info = _block_krylov(
                 H, A, k, shift=shift, tol=tol, backend=backend, initial=initial, factor=factor,
-                max_cycles=max_cycles, spectral_scale=spectral_scale,
+                max_cycles=max_cycles, spectral_scale=spectral_scale, progress=progress,
             )  # fmt: skip
         except ConvergenceError as stalled:
             values, vectors, info = _fallback(H, A, k, shift, tol, spectral_scale, str(stalled))
+    _report(progress, k, k)
     fix_signs(vectors)
     return values, vectors, replace(info, seconds=time.perf_counter() - start)
+
+
+def _report(progress, converged: int, k: int) -> None:
+    if progress is not None:
+        progress(int(converged), int(k))
 
 
 def _fallback(H, A, k: int, shift: float, tol: float, spectral_scale: float, stalled: str):
@@ -700,7 +715,7 @@ def _columns(matrix, stop):
     return None if matrix is None else matrix[:, :stop]
 
 
-def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, spectral_scale):
+def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, spectral_scale, progress=None):
     """Block Krylov-Schur for the dominant eigenpairs of S = (H - shift A)^-1 A in <.,.>_A.
 
     Invariant: Q = [closed | frontier] is A-orthonormal, ``S Q_closed = Q T[:, closed]`` exactly up to
@@ -755,6 +770,7 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         if restart or (f1 >= wanted and since_check >= check_every):
             since_check = 0
             theta, Y, W, E, residual = _ritz(H, T, f1, bn, min(wanted, f1), k, Qn, AQn, shift, mass, spectral_scale)
+            _report(progress, np.sum(residual[:k] <= tol), k)
             if len(E) >= k and np.all(residual[:k] <= tol):
                 X = Q[:, :f1] @ Y[:, :k]
                 return E[:k], X, SolveInfo("krylov", cycles, solves, float(residual[:k].max()), shift=shift)
