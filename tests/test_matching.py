@@ -318,7 +318,8 @@ def test_cli_match(tmp_path, pair, method):
     hamsa.save_mesh(rolled, tmp_path / "rolled.ply")
     out = tmp_path / "map.npy"
     extra = ["--landmarks", "0:0"] if method == "icskm" else []
-    command = ["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--method", method, "-o", str(out)]
+    command = ["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--method", method, "-k", "30",
+               "-o", str(out)]  # fmt: skip
     assert main(command + extra) == 0
     mapping = np.load(out)
     errors = geodesic_errors(rolled, mapping, np.arange(flat.n_vertices))
@@ -559,7 +560,8 @@ def test_cli_match_with_repair_answers_in_the_inputs_vertex_ids(tmp_path, pair, 
         hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], rolled.vertices]), rolled.faces + 1), tmp_path / "target.off"
     )
     out = tmp_path / "map.npy"
-    command = ["match", str(tmp_path / "source.off"), str(tmp_path / "target.off"), "--method", method, "--repair"]
+    command = ["match", str(tmp_path / "source.off"), str(tmp_path / "target.off"), "--method", method, "--repair",
+               "-k", "30"]  # fmt: skip
     assert main(command + (["--landmarks", "0:1"] if method == "icskm" else []) + ["-o", str(out)]) == 0
     mapping = np.load(out)
     assert mapping.shape == (n + 3,) and np.all(mapping[n:] == -1) and mapping[:n].min() >= 1

@@ -244,7 +244,13 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("--points", type=_positive_int, default=1000, help="--truth: scored vertices (default 1000)")
     match.add_argument("--scores", help="--truth: output .json (default: the output's name with .scores.json)")
     match.add_argument("--fmap", help="also save the functional map C (k x k, source rows) of the final map as .npy")
-    match.add_argument("-k", type=_positive_int, default=30, help="eigenpairs of each shape (default 30)")
+    match.add_argument(
+        "-k",
+        type=_positive_int,
+        default=100,
+        help="eigenpairs of each shape (default 100, as benchmark-matching and the paper; fmap needs >= 20, "
+        "wks >= 60)",
+    )
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
     bench = commands.add_parser(
@@ -650,6 +656,8 @@ def _match(args) -> None:
     if (args.source_potential is None) != (args.target_potential is None):
         raise HamsaError("--source-potential and --target-potential go together (one potential per shape)")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
+    if k != args.k:
+        print(f"-k {args.k} is too few for {args.method}: using k = {k}", file=sys.stderr)
     with _Steps(args, 7) as step:
         step("reading the meshes")
         loaded = [_load_for_operators(path, args.repair) for path in (args.source, args.target)]
