@@ -633,3 +633,17 @@ def test_cli_match_truth_in_input_ids_through_repair(tmp_path, pair, capsys):
     np.save(tmp_path / "short.npy", truth[:-1])
     assert main(command[:-6] + ["--truth", str(tmp_path / "short.npy"), "-o", str(out)]) == 2
     assert f"has {n + 2} entries, the source has {n + 3} vertices" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method, landmarks", [("fmap", None), ("icskm", ([0], [0]))])
+def test_long_matchers_report_their_progress_and_it_changes_nothing(pair, method, landmarks):
+    from hamsa import matching
+
+    flat, rolled = pair
+    bases = hamsa.eigenbasis(flat, 30), hamsa.eigenbasis(rolled, 30)
+    calls = []
+    mapping = matching.match(
+        *bases, method, landmarks=landmarks, progress=lambda done, total: calls.append((done, total))
+    )
+    np.testing.assert_array_equal(mapping, matching.match(*bases, method, landmarks=landmarks))
+    assert calls and calls[-1][0] == calls[-1][1] and [d for d, _ in calls] == list(range(1, len(calls) + 1))

@@ -248,8 +248,7 @@ def _parser() -> argparse.ArgumentParser:
         "-k",
         type=_positive_int,
         default=100,
-        help="eigenpairs of each shape (default 100, as benchmark-matching and the paper; fmap needs >= 20, "
-        "wks >= 60)",
+        help="eigenpairs of each shape (default 100, as benchmark-matching and the paper; fmap needs >= 20, wks >= 60)",
     )
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
 
@@ -369,9 +368,9 @@ class _Steps:
         self.bar.set_postfix_str("", refresh=False)
         self.bar.set_description_str(name)
 
-    def converged(self, count: int, k: int) -> None:
-        """An eigensolver's ``progress``: the current step's line ends with how many of k pairs converged."""
-        self.bar.set_postfix_str(f"{count}/{k} eigenpairs converged")
+    def counter(self, unit: str):
+        """A ``progress(done, total)`` callback that ends the current step's line with "done/total unit"."""
+        return lambda done, total: self.bar.set_postfix_str(f"{done}/{total} {unit}")
 
     def __enter__(self):
         return self
@@ -508,7 +507,7 @@ def _basis(args) -> None:
             laplacian=args.laplacian,
             device=args.device,
             boundary=boundary,
-            progress=step.converged,
+            progress=step.counter("eigenpairs converged"),
         )
         solved = time.perf_counter()
         step(f"writing {output.name}")
@@ -666,7 +665,8 @@ def _match(args) -> None:
         landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
         bases, basis = _match_bases(args, loaded, meshes, landmarks, k, step)
         step(f"matching ({args.method})")
-        mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes)
+        unit = {"fmap": "ZoomOut sizes", "icskm": "ICP runs"}.get(args.method, "")
+        mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes, progress=step.counter(unit))
         if truth is not None:
             step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
             scores = map_scores(meshes[1], mapping, truth, args.points)
@@ -728,14 +728,14 @@ def _match_bases(args, loaded, meshes, landmarks, k: int, step):
         lbo = []
         for side, mesh in zip(("source", "target"), meshes):
             step(f"{side} LBO eigenbasis (k = {k}, n = {mesh.n_vertices})")
-            lbo.append(eigenbasis(mesh, k, progress=step.converged))
+            lbo.append(eigenbasis(mesh, k, progress=step.counter("eigenpairs converged")))
         V, name = matching_potentials(*lbo, meshes=meshes), "matching potential"
     else:
         V, name = [None, None], "LBO"
     bases = []
     for side, mesh, potential in zip(("source", "target"), meshes, V):
         step(f"{side} {'LBO' if potential is None else 'Hamiltonian'} eigenbasis (k = {k}, n = {mesh.n_vertices})")
-        bases.append(eigenbasis(mesh, k, potential, progress=step.converged))
+        bases.append(eigenbasis(mesh, k, potential, progress=step.counter("eigenpairs converged")))
     return bases, name
 
 

@@ -88,7 +88,9 @@ def icp_refine(
     return C, nearest(C)
 
 
-def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=None) -> tuple[np.ndarray, np.ndarray]:
+def zoomout(
+    map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=None, progress=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Spectral upsampling (ZoomOut, Melzi et al. 2019): refine a point map by alternating
     ``C_k = Psi_s[:, :k]^T A_s Pi Psi_t[:, :k]`` and the nearest-neighbour map of C_k, for growing k.
 
@@ -98,6 +100,7 @@ def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=
     source, target : eigenbases with at least max(sizes) eigenpairs
     sizes : increasing basis sizes (default every integer from min(10, k) to k = min(k_s, k_t); starting
         much smaller collapses the map: a 4-dimensional embedding cannot tell most vertices apart)
+    progress : optional ``progress(done, total)``, called after each size
 
     Returns
     -------
@@ -109,10 +112,12 @@ def zoomout(map_source_to_target, source: Eigenbasis, target: Eigenbasis, sizes=
         raise HamsaError(f"sizes must lie in [1, {top}], got {sizes}")
     mapping = np.asarray(map_source_to_target)
     C = None
-    for size in sizes:
+    for done, size in enumerate(sizes, 1):
         s, t = source.truncate(size), target.truncate(size)
         C = functional_from_map(mapping, s, t)
         mapping = map_from_functional(C, s, t)
+        if progress is not None:
+            progress(done, len(sizes))
     return C, mapping
 
 

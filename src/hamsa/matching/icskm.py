@@ -218,22 +218,35 @@ class KernelICP:
         return float(energy + landmark_mass * np.sum(landmark_residual**2))
 
 
-def lowest_energy_run(icp: KernelICP, runs: list, sampled: np.ndarray) -> np.ndarray:
+def lowest_energy_run(icp: KernelICP, runs: list, sampled: np.ndarray, progress=None) -> np.ndarray:
     """The C of the (start, schedule) run that ends with the lowest energy on the ICP sample ``sampled``.
 
     With several runs, all are first compared on a third of the sample; those within :data:`NEAR_TIE` of
     the lowest energy there are run on the whole sample, where the lowest wins. Runs that reach a state an
-    earlier one passed through stop there (:meth:`KernelICP.run`).
+    earlier one passed through stop there (:meth:`KernelICP.run`). ``progress(done, total)`` is called after
+    each run (the total grows once the runs kept for the whole sample are known).
     """
+    done, total = 0, len(runs)
+
+    def report():
+        if progress is not None:
+            progress(done, total)
+
     if len(runs) > 1:
         explored, visited = sampled[: max(len(sampled) // 3, 1)], {}
         ranked = {}  # energy on the explored third -> the first run that ended there
         for start, times in runs:
             ranked.setdefault(icp.run(start, times, explored, visited)[1], (start, times))
+            done += 1
+            report()
         runs = [run for energy, run in ranked.items() if energy <= NEAR_TIE * min(ranked)]
-    finished = {}
-    C, _ = min((icp.run(start, times, sampled, finished) for start, times in runs), key=lambda result: result[1])
-    return C
+        total += len(runs)
+    finished, results = {}, []
+    for start, times in runs:
+        results.append(icp.run(start, times, sampled, finished))
+        done += 1
+        report()
+    return min(results, key=lambda result: result[1])[0]
 
 
 def match_icskm(
@@ -250,6 +263,7 @@ def match_icskm(
     features: tuple[np.ndarray, np.ndarray] | None = None,
     feature_weight: float = 0.2,
     restarts: int = 5,
+    progress=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
@@ -276,6 +290,7 @@ def match_icskm(
         swapping parts that the kernels alone cannot tell apart (left and right limbs)
     feature_weight : the features' size relative to the embedding's
     restarts : sign-flipped starts (0 with a single schedule, e.g. ``scales=6``: the paper's single run)
+    progress : optional ``progress(done, total)``, called after each ICP run (:func:`lowest_energy_run`)
 
     Returns
     -------
@@ -306,6 +321,6 @@ def match_icskm(
     icp = KernelICP(embedding, p, q, landmark_weight, int(iterations))
     starts = sign_flip_starts(C, source, restarts)  # once: each start runs through every schedule
     runs = [(start, times) for times in schedules for start in starts]
-    C = lowest_energy_run(icp, runs, sampled)
+    C = lowest_energy_run(icp, runs, sampled, progress)
     finest = embedding.at(schedules[0][-1])  # every schedule ends at the same finest scale
     return C, nearest_rows(finest.queries(C), finest.target)

@@ -16,7 +16,9 @@ METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
 START_K = 20
 
 
-def match(source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landmarks=None, meshes=None) -> np.ndarray:
+def match(
+    source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landmarks=None, meshes=None, progress=None
+) -> np.ndarray:
     """``map_source_to_target`` (n_s,): for each source vertex, a target vertex, by one of :data:`METHODS`.
 
     - ``hks`` / ``wks``: nearest neighbours of 50 heat / wave kernel signature columns;
@@ -35,6 +37,8 @@ def match(source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landm
     landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``
     meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``. Every other
         method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
+    progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), ICSKM's ICP
+        runs (``icskm``, ``icskm_geo``); the other methods do not call it
 
     Raises
     ------
@@ -43,10 +47,10 @@ def match(source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landm
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-    return _MATCHERS[method](source, target, landmarks, meshes)
+    return _MATCHERS[method](source, target, landmarks, meshes, progress)
 
 
-def _hks(source, target, landmarks, meshes):
+def _hks(source, target, landmarks, meshes, progress):
     from hamsa.diffusion import default_hks_times, heat_kernel_signature
 
     times = default_hks_times(source, 50)
@@ -55,7 +59,7 @@ def _hks(source, target, landmarks, meshes):
     )
 
 
-def _wks(source, target, landmarks, meshes):
+def _wks(source, target, landmarks, meshes, progress):
     from hamsa.diffusion import default_wks_energies, wave_kernel_signature
 
     energies, sigma = default_wks_energies(source, 50)
@@ -77,12 +81,12 @@ def hks_functional_map(source: Eigenbasis, target: Eigenbasis, k: int = START_K)
     return icp_refine(C, *small)
 
 
-def _fmap(source, target, landmarks, meshes):
+def _fmap(source, target, landmarks, meshes, progress):
     _, initial = hks_functional_map(source, target)
-    return zoomout(initial, source, target, sizes=range(START_K, min(source.k, target.k) + 1, 4))[1]
+    return zoomout(initial, source, target, range(START_K, min(source.k, target.k) + 1, 4), progress)[1]
 
 
-def _sgfe(source, target, landmarks, meshes):
+def _sgfe(source, target, landmarks, meshes, progress):
     if meshes is None:
         raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
     C, _ = hks_functional_map(source, target)
@@ -91,13 +95,13 @@ def _sgfe(source, target, landmarks, meshes):
     return match_sgfe(*meshes, source, target, start)[1]
 
 
-def _icskm(source, target, landmarks, meshes, features=None):
+def _icskm(source, target, landmarks, meshes, progress, features=None):
     if landmarks is None:
         raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
-    return match_icskm(source, target, *landmarks, features=features)[1]
+    return match_icskm(source, target, *landmarks, features=features, progress=progress)[1]
 
 
-def _icskm_geo(source, target, landmarks, meshes):
+def _icskm_geo(source, target, landmarks, meshes, progress):
     from hamsa.geodesic import geodesic_solver
 
     if landmarks is None:
@@ -107,7 +111,7 @@ def _icskm_geo(source, target, landmarks, meshes):
     features = tuple(
         geodesic_solver(shape).distances_from(ids, unreachable="farthest") for shape, ids in zip(meshes, landmarks)
     )
-    return _icskm(source, target, landmarks, meshes, features)
+    return _icskm(source, target, landmarks, meshes, progress, features)
 
 
 _MATCHERS = {"hks": _hks, "wks": _wks, "fmap": _fmap, "sgfe": _sgfe, "icskm": _icskm, "icskm_geo": _icskm_geo}
