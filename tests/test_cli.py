@@ -132,7 +132,7 @@ def test_cli_view_writes_a_self_contained_page(tmp_path):
     page = tmp_path / "view.html"
     assert main(["view", str(mesh_path), "-k", "4", "-o", str(page)]) == 0
     text = page.read_text()
-    assert "psi4" in text and "<script src=" not in text
+    assert "psi 4 (E =" in text and "psi 0 (E" not in text and "<script src=" not in text  # constant skipped
     assert main(["view", str(mesh_path), "-o", str(tmp_path / "view.png")]) == 2  # wrong suffix
 
 
