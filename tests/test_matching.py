@@ -647,3 +647,79 @@ def test_long_matchers_report_their_progress_and_it_changes_nothing(pair, method
     )
     np.testing.assert_array_equal(mapping, matching.match(*bases, method, landmarks=landmarks))
     assert calls and calls[-1][0] == calls[-1][1] and [d for d, _ in calls] == list(range(1, len(calls) + 1))
+
+
+def _dense_functional_map(source, target, F, G, w_lap, pairs):
+    """The same energy vectorized (row-major vec(C)) and solved densely: an independent reference."""
+    a, b = source.project(F), target.project(G)
+    ks, kt = source.k, target.k
+    scale = max(np.abs(source.values).max(), np.abs(target.values).max())
+    ls, lt = source.values / scale, target.values / scale
+    identity_s, identity_t = np.eye(ks), np.eye(kt)
+    # vec(C X) = kron(I, X^T) vec(C); vec(X C) = kron(X, I) vec(C) for row-major vec
+    blocks = [np.kron(identity_s, b.T)]
+    rhs = [a.reshape(-1)]
+    blocks.append(np.sqrt(w_lap) * (np.kron(identity_s, np.diag(lt)) - np.kron(np.diag(ls), identity_t)))
+    rhs.append(np.zeros(ks * kt))
+    for weight, Xt, Xs in pairs:
+        blocks.append(np.sqrt(weight) * (np.kron(identity_s, Xt.T) - np.kron(Xs, identity_t)))
+        rhs.append(np.zeros(ks * kt))
+    return np.linalg.lstsq(np.vstack(blocks), np.concatenate(rhs), rcond=None)[0].reshape(ks, kt)
+
+
+def test_commutativity_and_orientation_terms_match_a_dense_solve_of_the_same_energy(pair):
+    from hamsa.matching import multiplication_operator, orientation_operator
+
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 8), hamsa.eigenbasis(rolled, 7)
+    times = default_hks_times(source, 4)
+    F, G = heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
+    C = functional_map(source, target, F, G, commutativity_weight=0.1, orientation_weight=0.5, meshes=pair)
+    scales = np.abs(F).max(axis=0)
+    pairs = []
+    for f, g in zip((F / scales).T, (G / scales).T):
+        pairs.append((0.1, multiplication_operator(target, g), multiplication_operator(source, f)))
+        pairs.append((0.5, orientation_operator(rolled, target, g), orientation_operator(flat, source, f)))
+    reference = _dense_functional_map(source, target, F, G, 1e-3, pairs)
+    assert np.abs(C - reference).max() < 1e-6 * np.abs(reference).max()
+    plain = functional_map(source, target, F, G)
+    assert np.abs(plain - reference).max() > 1e-3  # the terms changed the answer
+    assert np.abs(plain - _dense_functional_map(source, target, F, G, 1e-3, [])).max() < 1e-5  # its tiny ridge
+
+
+def test_orientation_operator_is_antisymmetric_and_flips_with_a_mirror_image():
+    from hamsa.matching import orientation_operator
+
+    mesh = shapes.humanoid()
+    basis = hamsa.eigenbasis(mesh, 12)
+    f = heat_kernel_signature(basis, default_hks_times(basis, 3))[:, 1]
+    operator = orientation_operator(mesh, basis, f)
+    assert np.abs(operator + operator.T).max() < 1e-10 * np.abs(operator).max()  # div (N x grad f) = 0 on a closed mesh
+    mirror = hamsa.TriMesh(mesh.vertices * [-1.0, 1.0, 1.0], mesh.faces[:, ::-1])  # outward normals kept
+    flipped = orientation_operator(mirror, basis, f)  # same W and A, so the same basis
+    assert np.abs(flipped + operator).max() < 1e-10 * np.abs(operator).max()
+
+
+def test_the_true_map_of_an_isometry_commutes_with_the_orientation_preserving_operators(pair):
+    from hamsa.matching import multiplication_operator, orientation_operator
+
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 15), hamsa.eigenbasis(rolled, 15)
+    truth = functional_from_map(np.arange(flat.n_vertices), source, target)
+    f = heat_kernel_signature(source, default_hks_times(source, 3))[:, 1]
+    g = heat_kernel_signature(target, default_hks_times(source, 3))[:, 1]
+    Os, Ot = orientation_operator(flat, source, f), orientation_operator(rolled, target, g)
+    preserving = np.linalg.norm(truth @ Ot - Os @ truth)
+    reversing = np.linalg.norm(truth @ Ot + Os @ truth)
+    assert preserving < 0.1 * reversing
+    Ms, Mt = multiplication_operator(source, f), multiplication_operator(target, g)
+    assert np.linalg.norm(truth @ Mt - Ms @ truth) < 0.05 * np.linalg.norm(Ms)
+
+
+def test_functional_map_refuses_an_orientation_term_without_meshes(pair):
+    source = hamsa.eigenbasis(pair[0], 5)
+    F = heat_kernel_signature(source, default_hks_times(source, 3))
+    with pytest.raises(HamsaError, match="needs the two meshes"):
+        functional_map(source, source, F, F, orientation_weight=1.0)
+    with pytest.raises(HamsaError, match="orientation must be"):
+        functional_map(source, source, F, F, orientation_weight=1.0, meshes=pair, orientation="left")

@@ -17,7 +17,9 @@ from hamsa.matching.functional import (
     functional_map,
     icp_refine,
     map_from_functional,
+    multiplication_operator,
     offdiagonal_energy,
+    orientation_operator,
     zoomout,
 )
 from hamsa.matching.icskm import match_icskm
@@ -43,8 +45,10 @@ __all__ = [
     "match_icskm",
     "match_sgfe",
     "matching_potentials",
+    "multiplication_operator",
     "nearest_rows",
     "offdiagonal_energy",
+    "orientation_operator",
     "resolve_signs",
     "resolve_signs_without_truth",
     "spectral_gradient_fields",

@@ -16,9 +16,21 @@ from hamsa.errors import HamsaError
 from hamsa.matching.icp import alternate, procrustes
 from hamsa.matching.nearest import nearest_in, nearest_rows
 
+# the coupled functional-map fit solves a dense system of (k_s k_t)^2 entries: 4096 unknowns = 128 MiB
+MAX_COUPLED_UNKNOWNS = 4096
+
 
 def functional_map(
-    source: Eigenbasis, target: Eigenbasis, source_descriptors, target_descriptors, laplacian_weight: float = 1e-3
+    source: Eigenbasis,
+    target: Eigenbasis,
+    source_descriptors,
+    target_descriptors,
+    laplacian_weight: float = 1e-3,
+    *,
+    commutativity_weight: float = 0.0,
+    orientation_weight: float = 0.0,
+    meshes=None,
+    orientation: str = "preserving",
 ) -> np.ndarray:
     """The (k_s, k_t) functional map C pulling target functions back to the source, fitted to descriptors.
 
@@ -27,10 +39,24 @@ def functional_map(
     ``(b b^T + w diag((lambda_t - lambda_s,i)^2)) c_i = b a_i``. The eigenvalues are divided by the largest
     magnitude on either shape, so w is scale-free.
 
+    Two optional terms (Nogneng & Ovsjanikov 2017; Ren et al. 2018), each summed over the d descriptor
+    pairs (f, g), both divided by max |f| on the source so that the weights are in the units of w:
+
+    - descriptor commutativity, ``commutativity_weight * ||C M_g - M_f C||^2`` with the multiplication
+      operators ``M_f = Psi_s^T A_s diag(f) Psi_s`` (:func:`multiplication_operator`);
+    - orientation, ``orientation_weight * ||C O_g -+ O_f C||^2`` with ``O_f = int psi_i (N x grad f) . grad psi_j``
+      (:func:`orientation_operator`, needs ``meshes``): ``-`` for ``orientation="preserving"`` maps between
+      consistently oriented surfaces, ``+`` for ``"reversing"`` ones (a left-right symmetry).
+
+    With either term the energy couples all entries of C; its normal equations are assembled and solved
+    densely, for at most :data:`MAX_COUPLED_UNKNOWNS` entries (fit on a truncated basis, then ZoomOut).
+
     Raises
     ------
     HamsaError
-        If the descriptors are not (n, d) arrays with the same d on both shapes.
+        If the descriptors are not (n, d) arrays with the same d on both shapes, an orientation term is asked
+        for without ``meshes`` or with an unknown ``orientation``, or the coupled system has more than
+        :data:`MAX_COUPLED_UNKNOWNS` unknowns.
     """
     a = source.project(source_descriptors)  # (k_s, d)
     b = target.project(target_descriptors)  # (k_t, d)
@@ -39,11 +65,93 @@ def functional_map(
     scale = max(np.abs(source.values).max(), np.abs(target.values).max(), 1e-300)
     ls, lt = source.values / scale, target.values / scale
     gram = b @ b.T
+    ridge = 1e-12 * np.trace(gram) * np.eye(target.k)
+    pairs = _operator_pairs(
+        source, target, source_descriptors, target_descriptors, commutativity_weight, orientation_weight, meshes,
+        orientation,
+    )  # fmt: skip
+    if pairs:
+        return _coupled_solve(a @ b.T, gram, laplacian_weight, ls, lt, ridge, pairs)
     C = np.empty((source.k, target.k))
     for i in range(source.k):
         system = gram + laplacian_weight * np.diag((lt - ls[i]) ** 2)
-        C[i] = np.linalg.solve(system + 1e-12 * np.trace(gram) * np.eye(target.k), b @ a[i])
+        C[i] = np.linalg.solve(system + ridge, b @ a[i])
     return C
+
+
+def multiplication_operator(basis: Eigenbasis, f) -> np.ndarray:
+    """``M_f = Psi^T A diag(f) Psi`` (k, k): multiplication by a function f (n,) in the basis."""
+    f = np.asarray(f, dtype=np.float64)
+    if f.shape != (basis.n,):
+        raise HamsaError(f"the function has shape {f.shape}, expected ({basis.n},)")
+    return basis.vectors.T @ (basis.mass @ (f[:, None] * basis.vectors))
+
+
+def orientation_operator(mesh, basis: Eigenbasis, f) -> np.ndarray:
+    """``O_f[i, j] = int psi_i (N x grad f) . grad psi_j dA`` (k, k) on a triangle mesh, for f (n,), or one
+    per column, (d, k, k), for f (n, d): the derivative along the rotated gradient of f, in the basis. Exact
+    for P1 functions (per face, area x the mean of psi_i x the constant (N x grad f) . grad psi_j);
+    antisymmetric on a closed mesh, and its sign flips with the surface's orientation, which is what tells a
+    map from its mirror image."""
+    from hamsa.mesh import as_trimesh
+    from hamsa.operators import face_gradients
+
+    mesh = as_trimesh(mesh)
+    f = np.asarray(f, dtype=np.float64)
+    if mesh.n_vertices != basis.n or f.ndim not in (1, 2) or f.shape[0] != basis.n:
+        raise HamsaError(f"mesh ({mesh.n_vertices} vertices), basis ({basis.n}) and f {f.shape} must agree")
+    columns = f.reshape(basis.n, -1)
+    v, faces = mesh.vertices, mesh.faces
+    normal = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    rotated = np.cross(normal[:, :, None], face_gradients(mesh, columns), axis=1)  # (m, 3, d)
+    gradients = face_gradients(mesh, basis.vectors)  # (m, 3, k)
+    weighted_mean = mesh.face_areas[:, None] * basis.vectors[faces].mean(axis=1)  # (m, k)
+    operators = np.stack([weighted_mean.T @ np.einsum("mc,mck->mk", r, gradients) for r in rotated.T.swapaxes(1, 2)])
+    return operators[0] if f.ndim == 1 else operators
+
+
+def _operator_pairs(source, target, F, G, commutativity_weight, orientation_weight, meshes, orientation):
+    """[(weight, X_t, X_s)] of the terms ``weight ||C X_t - X_s C||^2`` beyond the Laplacian's."""
+    if orientation not in ("preserving", "reversing"):
+        raise HamsaError(f"orientation must be 'preserving' or 'reversing', got {orientation!r}")
+    if orientation_weight and meshes is None:
+        raise HamsaError("the orientation term needs the two meshes (meshes=(source, target))")
+    F, G = np.asarray(F, dtype=np.float64), np.asarray(G, dtype=np.float64)
+    scales = np.maximum(np.abs(F).max(axis=0), 1e-300)
+    F, G = F / scales, G / scales
+    pairs = []
+    if commutativity_weight:
+        pairs += [
+            (commutativity_weight, multiplication_operator(target, g), multiplication_operator(source, f))
+            for f, g in zip(F.T, G.T)
+        ]
+    if orientation_weight:
+        sign = -1.0 if orientation == "reversing" else 1.0
+        pairs += [
+            (orientation_weight, Ot, sign * Os)
+            for Os, Ot in zip(orientation_operator(meshes[0], source, F), orientation_operator(meshes[1], target, G))
+        ]
+    return pairs
+
+
+def _coupled_solve(rhs, gram, laplacian_weight, ls, lt, ridge, pairs) -> np.ndarray:
+    """Minimize the full energy: its normal equations on the row-major vec(C), assembled from Kronecker
+    products (``vec(C X) = (I kron X^T) vec(C)``, ``vec(X C) = (X kron I) vec(C)``) and solved densely."""
+    ks, kt = rhs.shape
+    if ks * kt > MAX_COUPLED_UNKNOWNS:
+        raise HamsaError(
+            f"the commutativity and orientation terms couple all {ks} x {kt} entries of C; fit C on at most "
+            f"{MAX_COUPLED_UNKNOWNS} entries (e.g. 64 x 64 eigenpairs, via truncate) and refine it with zoomout"
+        )
+    identity_s, identity_t = np.eye(ks), np.eye(kt)
+    normal = np.kron(identity_s, gram + ridge)
+    normal[np.diag_indices(ks * kt)] += laplacian_weight * ((lt[None, :] - ls[:, None]) ** 2).reshape(-1)
+    for weight, Xt, Xs in pairs:
+        normal += weight * (
+            np.kron(identity_s, Xt @ Xt.T) - np.kron(Xs, Xt) - np.kron(Xs.T, Xt.T) + np.kron(Xs.T @ Xs, identity_t)
+        )
+    return np.linalg.solve(normal, rhs.reshape(-1)).reshape(ks, kt)
 
 
 def map_from_functional(C: np.ndarray, source: Eigenbasis, target: Eigenbasis) -> np.ndarray:
