@@ -723,3 +723,35 @@ def test_functional_map_refuses_an_orientation_term_without_meshes(pair):
         functional_map(source, source, F, F, orientation_weight=1.0)
     with pytest.raises(HamsaError, match="orientation must be"):
         functional_map(source, source, F, F, orientation_weight=1.0, meshes=pair, orientation="left")
+
+
+def test_landmark_heat_kernel_maps_are_one_at_their_landmark_and_correspond_on_an_isometry(pair):
+    from hamsa.diffusion import landmark_descriptors
+
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 40), hamsa.eigenbasis(rolled, 40)
+    ids = np.array([10, 900, 1500])
+    times = default_hks_times(source, 5)
+    F, G = landmark_descriptors(source, ids, times), landmark_descriptors(target, ids, times)
+    assert F.shape == (flat.n_vertices, 15)
+    assert np.allclose(F[ids.repeat(5), np.arange(15)], 1.0)
+    assert np.abs(F - G).max() < 0.05  # an isometry: the same kernels
+    with pytest.raises(HamsaError, match="source vertices"):
+        landmark_descriptors(source, [flat.n_vertices])
+
+
+def test_fmap_with_landmarks_uses_them_and_stays_right_on_an_isometry(pair):
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 40), hamsa.eigenbasis(rolled, 40)
+    ids = np.array([10, 900, 1500])
+    with_landmarks = hamsa.matching.match(source, target, "fmap", landmarks=(ids, ids))
+    errors = geodesic_errors(rolled, with_landmarks, np.arange(flat.n_vertices))
+    assert summary(errors)["within_0.05"] > 0.95
+    # three landmarks' heat kernel maps alone pin the functional map down
+    from hamsa.diffusion import landmark_descriptors
+
+    small = source.truncate(20), target.truncate(20)
+    times = default_hks_times(source, 5)
+    C = functional_map(*small, landmark_descriptors(source, ids, times), landmark_descriptors(target, ids, times))
+    _, mapping = icp_refine(C, *small)
+    assert summary(geodesic_errors(rolled, mapping, np.arange(flat.n_vertices)))["within_0.05"] > 0.9

@@ -74,6 +74,19 @@ def heat_kernel(basis: Eigenbasis, t, sources) -> np.ndarray:
     return out[0] if np.ndim(t) == 0 else out
 
 
+def landmark_descriptors(basis: Eigenbasis, landmarks, times=None) -> np.ndarray:
+    """Heat kernel maps from landmark vertices, ``K_t(x, l) / K_t(l, l)`` for each landmark l and time t:
+    (n, s T) columns ordered landmark-major, each 1 at its landmark. Given the two shapes' landmarks in
+    corresponding order, they are corresponding descriptors: what turns known pairs into constraints of a
+    functional map (:func:`hamsa.matching.functional_map`). ``times`` default: 5 of :func:`default_hks_times`.
+    """
+    index = _sources(basis, landmarks)
+    times = default_hks_times(basis, 5) if times is None else _times(times)
+    kernel = heat_kernel(basis, times, index)  # (T, n, s)
+    kernel = kernel / kernel[:, index, np.arange(index.size)][:, None, :]
+    return kernel.transpose(1, 2, 0).reshape(basis.n, -1)
+
+
 def diffuse_time_stepping(mesh, u0, t: float, potential=None, steps: int = 200, mass: str = "voronoi") -> np.ndarray:
     """Reference solution of ``A du/dt = -(W + A V) u`` by implicit time stepping (no eigenbasis).
 

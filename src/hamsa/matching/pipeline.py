@@ -22,7 +22,8 @@ def match(
     """``map_source_to_target`` (n_s,): for each source vertex, a target vertex, by one of :data:`METHODS`.
 
     - ``hks`` / ``wks``: nearest neighbours of 50 heat / wave kernel signature columns;
-    - ``fmap``: an HKS-fitted functional map on the first 20 eigenpairs, ICP, then ZoomOut up to k;
+    - ``fmap``: an HKS-fitted functional map on the first 20 eigenpairs (with ``landmarks``, their heat
+      kernel maps as further descriptors), ICP, then ZoomOut up to k;
     - ``sgfe``: the spectral gradient fields embedding (:func:`~hamsa.matching.match_sgfe`) from that
       functional map (needs ``meshes``);
     - ``icskm``: iterative closest spectral kernel maps (:func:`~hamsa.matching.match_icskm`) from
@@ -34,7 +35,7 @@ def match(
     ----------
     source, target : the two shapes' eigenbases (the LBO's or Hamiltonians'), with the same k for the
         spectral methods; use shapes scaled alike (e.g. :meth:`hamsa.TriMesh.scaled_to_unit_area`)
-    landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``
+    landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``; optional for ``fmap``
     meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``. Every other
         method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
     progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), ICSKM's ICP
@@ -68,21 +69,28 @@ def _wks(source, target, landmarks, meshes, progress):
     )
 
 
-def hks_functional_map(source: Eigenbasis, target: Eigenbasis, k: int = START_K) -> tuple[np.ndarray, np.ndarray]:
+def hks_functional_map(
+    source: Eigenbasis, target: Eigenbasis, k: int = START_K, landmarks=None
+) -> tuple[np.ndarray, np.ndarray]:
     """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
-    ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``."""
-    from hamsa.diffusion import default_hks_times, heat_kernel_signature
+    ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``. With ``landmarks`` (source ids,
+    target ids), their heat kernel maps (:func:`hamsa.diffusion.landmark_descriptors`) join the HKS."""
+    from hamsa.diffusion import default_hks_times, heat_kernel_signature, landmark_descriptors
 
     small = source.truncate(k), target.truncate(k)
     times = default_hks_times(source, 30)
-    C = functional_map(
-        *small, heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-    )
-    return icp_refine(C, *small)
+    descriptors = [heat_kernel_signature(basis, times, scaled=True) for basis in (source, target)]
+    if landmarks is not None:
+        kernel_times = default_hks_times(source, 5)  # the same times on both shapes, as for the HKS
+        descriptors = [
+            np.hstack([d, landmark_descriptors(basis, ids, kernel_times)])
+            for d, basis, ids in zip(descriptors, (source, target), landmarks)
+        ]
+    return icp_refine(functional_map(*small, *descriptors), *small)
 
 
 def _fmap(source, target, landmarks, meshes, progress):
-    _, initial = hks_functional_map(source, target)
+    _, initial = hks_functional_map(source, target, landmarks=landmarks)
     return zoomout(initial, source, target, range(START_K, min(source.k, target.k) + 1, 4), progress)[1]
 
 
