@@ -106,6 +106,13 @@ class TriMesh:
         return _face_areas(self._vertices, self._faces)
 
     @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(m, 3) unit normal of each triangle, following its winding (counter-clockwise seen from the side it
+        points to)."""
+        v, f = self._vertices, self._faces
+        return np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]) / (2 * self.face_areas[:, None])
+
+    @cached_property
     def area(self) -> float:
         """Total surface area (sum of the triangle areas)."""
         return float(self.face_areas.sum())

@@ -179,9 +179,7 @@ def face_gradients(mesh, f: np.ndarray) -> np.ndarray:
     mesh = as_trimesh(mesh)
     v, faces = mesh.vertices, mesh.faces
     p = [v[faces[:, c]] for c in range(3)]
-    normal = np.cross(p[1] - p[0], p[2] - p[0])
-    double_area = np.linalg.norm(normal, axis=1)
-    normal /= double_area[:, None]
+    normal, double_area = mesh.face_normals, 2 * mesh.face_areas
     f = np.asarray(f, dtype=np.float64)
     grad = 0.0
     for c in range(3):

@@ -101,10 +101,8 @@ def orientation_operator(mesh, basis: Eigenbasis, f) -> np.ndarray:
     if mesh.n_vertices != basis.n or f.ndim not in (1, 2) or f.shape[0] != basis.n:
         raise HamsaError(f"mesh ({mesh.n_vertices} vertices), basis ({basis.n}) and f {f.shape} must agree")
     columns = f.reshape(basis.n, -1)
-    v, faces = mesh.vertices, mesh.faces
-    normal = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    rotated = np.cross(normal[:, :, None], face_gradients(mesh, columns), axis=1)  # (m, 3, d)
+    faces = mesh.faces
+    rotated = np.cross(mesh.face_normals[:, :, None], face_gradients(mesh, columns), axis=1)  # (m, 3, d)
     gradients = face_gradients(mesh, basis.vectors)  # (m, 3, k)
     weighted_mean = mesh.face_areas[:, None] * basis.vectors[faces].mean(axis=1)  # (m, k)
     operators = np.stack([weighted_mean.T @ np.einsum("mc,mck->mk", r, gradients) for r in rotated.T.swapaxes(1, 2)])
