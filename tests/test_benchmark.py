@@ -85,8 +85,14 @@ def test_cli_benchmark_matching(pose_dataset, tmp_path, capsys):
     assert code == 0 and "| hks | hamiltonian |" in capsys.readouterr().out
     assert json.loads((out / "table.json").read_text())["pairs"] == 1
     code = main(["benchmark-matching", str(pose_dataset), "--method", "hks", "-k", "30", "--points", "200",
-                 "--limit", "1", "--oracle", "-o", str(tmp_path / "oracle")])  # fmt: skip
-    assert code == 0 and "Hamiltonian potentials: oracle (from the ground truth)." in capsys.readouterr().out
+                 "--limit", "1", "--oracle", "--geodesics", "exact", "-o", str(tmp_path / "oracle")])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0 and "Hamiltonian potentials: oracle (from the ground truth)." in printed
+    assert "Geodesic errors: exact (MMP)." in printed
+    heat, exact = (json.loads((folder / "table.json").read_text()) for folder in (out, tmp_path / "oracle"))
+    assert heat["geodesics"] == "heat method" and exact["geodesics"] == "exact (MMP)"
+    lbo = [[row["mean_error"] for row in table["rows"] if row["basis"] == "lbo"] for table in (heat, exact)]
+    assert lbo[0] != lbo[1] and np.allclose(lbo[0], lbo[1], rtol=0.1)  # the same map, measured exactly
     assert main(["benchmark-matching", str(tmp_path / "nowhere"), "-o", str(out)]) == 2
 
 

@@ -74,9 +74,84 @@ def test_truth_distances_equal_geodesic_errors_for_every_map():
         np.testing.assert_allclose(table.errors(predicted), geodesic_errors(mesh, predicted, truth), rtol=1e-12)
     with pytest.raises(HamsaError, match="predicted"):
         table.errors(predicted[:5])
+    exact = TruthDistances(mesh, truth, geodesics="exact")
+    np.testing.assert_allclose(exact.errors(predicted), geodesic_errors(mesh, predicted, truth, geodesics="exact"),
+                               rtol=1e-12)  # fmt: skip
 
 
 def test_points_mapped_to_another_component_count_as_unreachable():
     scores = summary(np.array([0.0, 0.01, np.inf, 0.2]))
     assert scores["unreachable"] == 0.25 and scores["mean_error"] == pytest.approx(0.07)
     assert scores["within_0.05"] == 0.5 and 0 < scores["auc"] < 1
+
+
+def test_exact_geodesics_are_euclidean_on_an_irregular_planar_mesh():
+    from hamsa.geodesic import ExactGeodesicSolver
+
+    plane = shapes.rectangle(2.0, 1.0, 24, 12)
+    rng = np.random.default_rng(5)
+    low, high = plane.vertices.min(axis=0), plane.vertices.max(axis=0)
+    xy = plane.vertices[:, :2]
+    inside = np.flatnonzero(np.all((xy > low[:2] + 0.01) & (xy < high[:2] - 0.01), axis=1))
+    vertices = plane.vertices.copy()
+    vertices[inside, :2] += rng.uniform(-0.02, 0.02, (len(inside), 2))  # irregular, still convex and flat
+    plane = hamsa.TriMesh(vertices, plane.faces)
+    sources = np.array([0, 100, plane.n_vertices - 1])
+    euclidean = np.linalg.norm(plane.vertices[:, None, :] - plane.vertices[sources][None], axis=2)
+    np.testing.assert_allclose(ExactGeodesicSolver(plane).distances_from(sources), euclidean, atol=1e-12)
+    heat = GeodesicSolver(plane).distances_from(sources)
+    assert np.abs(heat - euclidean).max() > 1e-3  # the heat method is only first-order accurate here
+
+
+def test_exact_geodesics_beat_the_heat_method_on_a_sphere():
+    sphere = shapes.sphere(2000)
+    sources = np.array([0, 700])
+    great_circle = np.arccos(np.clip(sphere.vertices @ sphere.vertices[sources].T, -1, 1))
+    far = great_circle > 0.2
+    errors = {
+        method: np.mean(np.abs(hamsa.geodesic.geodesic_solver(sphere, method=method).distances_from(sources)
+                               - great_circle)[far] / great_circle[far])
+        for method in ("heat", "exact")
+    }  # fmt: skip
+    assert errors["exact"] < 0.002 and errors["exact"] < errors["heat"] / 5  # measured 0.0008 and 0.015
+
+
+def test_exact_pair_distances_equal_whole_propagations_near_and_far_and_across_pieces():
+    from hamsa.geodesic import ExactGeodesicSolver
+
+    sphere = shapes.sphere(600)
+    two = hamsa.TriMesh(np.vstack([sphere.vertices, sphere.vertices + [5.0, 0, 0]]),
+                        np.vstack([sphere.faces, sphere.faces + sphere.n_vertices]))  # fmt: skip
+    solver = ExactGeodesicSolver(two)
+    rng = np.random.default_rng(3)
+    sources = rng.integers(0, sphere.n_vertices, 60)
+    table = solver.distances_from(np.unique(sources))[:, np.searchsorted(np.unique(sources), sources)]
+    nearest = np.argsort(table, axis=0)[5]  # close pairs: found inside the first, small radius
+    targets = np.concatenate([nearest, rng.integers(0, two.n_vertices, 60)])  # far pairs and the other piece
+    sources = np.concatenate([sources, sources])
+    table = np.hstack([table, table])
+    expected = table[targets, np.arange(len(targets))]
+    assert np.isinf(expected).any() and np.isfinite(expected).any()
+    np.testing.assert_allclose(solver.between(sources, targets), expected, rtol=1e-12)
+    np.testing.assert_allclose(GeodesicSolver(two).between(sources, targets)[np.isfinite(expected)],
+                               expected[np.isfinite(expected)], rtol=0.1, atol=0.02)  # fmt: skip
+    assert np.isinf(GeodesicSolver(two).between(sources, targets)[~np.isfinite(expected)]).all()
+
+
+def test_exact_kim_scores_and_their_errors(body, monkeypatch):
+    from hamsa.evaluation import map_scores
+
+    points = sample_points(body.n_vertices, 200, seed=4)
+    exact = geodesic_errors(body, mirror_map(body)[points], points, geodesics="exact")
+    heat = geodesic_errors(body, mirror_map(body)[points], points)
+    assert np.median(np.abs(exact - heat) / np.maximum(exact, 1e-12)) < 0.05  # the same protocol
+    assert map_scores(body, np.arange(body.n_vertices), np.arange(body.n_vertices), 100, geodesics="exact")["auc"] == 1
+    with pytest.raises(HamsaError, match="one of"):
+        geodesic_errors(body, points, points, geodesics="dijkstra")
+    with pytest.raises(HamsaError, match="point cloud"):
+        hamsa.geodesic.geodesic_solver(hamsa.PointCloud(body.vertices), method="exact")
+    with pytest.raises(HamsaError, match="diffusion time"):
+        hamsa.geodesic.geodesic_solver(body, 0.1, method="exact")
+    monkeypatch.setitem(__import__("sys").modules, "pygeodesic.geodesic", None)
+    with pytest.raises(hamsa.errors.MissingDependencyError, match=r"hamsa\[geodesics\]"):
+        hamsa.geodesic.geodesic_distance(body, [0], method="exact")

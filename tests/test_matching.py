@@ -427,7 +427,7 @@ def test_cli_match_refuses_bad_landmarks(tmp_path, pair, capsys):
         (["--method", "icskm"], "needs --landmarks"),
         (["--method", "icskm", "--landmarks", "3-4"], "is not 'source_vertex:target_vertex'"),
         (["--method", "icskm", "--landmarks", f"0:{rolled.n_vertices}"], "target vertex"),
-        (["--method", "hks", "--landmarks", "0:0"], "is for --method icskm"),
+        (["--method", "hks", "--landmarks", "0:0"], "is for --method icskm or fmap"),
     ):
         assert main(base + extra) == 2
         assert message in capsys.readouterr().err
@@ -605,6 +605,29 @@ def test_cli_match_with_given_potentials_and_truth_equals_the_python_api(tmp_pat
     assert written["auc"] > 0.8  # a foot landmark on both poses: measured 0.95
 
 
+def test_cli_match_scores_with_exact_geodesics_as_the_python_api(tmp_path):
+    from hamsa.cli import main
+    from hamsa.evaluation import map_scores
+
+    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
+    hamsa.save_mesh(rest, tmp_path / "rest.off")
+    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    out = tmp_path / "map.npy"
+    command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "hks", "-k", "20",
+               "--basis", "lbo", "--truth", "identity", "--points", "200", "-q", "-o", str(out)]  # fmt: skip
+    written = {}
+    for kind in ("heat", "exact"):
+        assert main(command + ["--geodesics", kind, "--scores", str(tmp_path / f"{kind}.json")]) == 0
+        written[kind] = json.loads((tmp_path / f"{kind}.json").read_text())
+        assert written[kind]["geodesics"] == kind
+    target = hamsa.load_mesh(tmp_path / "walk.off").scaled_to_unit_area()
+    truth = np.arange(rest.n_vertices)
+    expected = map_scores(target, np.load(out), truth, points=200, geodesics="exact")
+    for key in ("auc", "mean_error", "within_0.05", "curve"):
+        np.testing.assert_allclose(written["exact"][key], expected[key], rtol=1e-12)
+    assert written["exact"]["mean_error"] != written["heat"]["mean_error"]  # a different (exact) measurement
+
+
 def test_cli_match_truth_in_input_ids_through_repair(tmp_path, pair, capsys):
     """--truth is given in the inputs' vertex ids; with --repair it is carried to the repaired meshes (the
     loose source triangle is not scored) and the scores equal the Python API's on the repaired meshes."""
@@ -755,3 +778,21 @@ def test_fmap_with_landmarks_uses_them_and_stays_right_on_an_isometry(pair):
     C = functional_map(*small, landmark_descriptors(source, ids, times), landmark_descriptors(target, ids, times))
     _, mapping = icp_refine(C, *small)
     assert summary(geodesic_errors(rolled, mapping, np.arange(flat.n_vertices)))["within_0.05"] > 0.9
+
+
+def test_cli_fmap_with_landmarks_equals_the_python_api(tmp_path, pair, capsys):
+    from hamsa.cli import main
+
+    flat, rolled = pair
+    hamsa.save_mesh(flat, tmp_path / "flat.ply")
+    hamsa.save_mesh(rolled, tmp_path / "rolled.ply")
+    out = tmp_path / "m.npy"
+    assert main(["match", str(tmp_path / "flat.ply"), str(tmp_path / "rolled.ply"), "--basis", "lbo", "-k", "30",
+                 "--landmarks", "10:10", "900:900", "1500:1500", "-q", "-o", str(out)]) == 0  # fmt: skip
+    meshes = [hamsa.load_mesh(tmp_path / name).scaled_to_unit_area() for name in ("flat.ply", "rolled.ply")]
+    bases = [hamsa.eigenbasis(m, 30) for m in meshes]
+    ids = np.array([10, 900, 1500])
+    expected = hamsa.matching.match(*bases, "fmap", landmarks=(ids, ids), meshes=meshes)
+    np.testing.assert_array_equal(np.load(out), expected)
+    wrong = hamsa.matching.match(*bases, "fmap", landmarks=(ids, ids[::-1]), meshes=meshes)
+    assert not np.array_equal(wrong, expected)  # the landmarks are used: wrong ones change the map

@@ -48,6 +48,10 @@ POTENTIAL_HELP = (
 )
 
 
+GEODESICS_HELP = (
+    "distances that score the maps: heat (the heat method, fast, first-order accurate) or exact (polyhedral "
+    "geodesics as in the published curves; the [geodesics] extra, much slower)"
+)
 POINTS_HELP = "a point cloud (.xyz .pts .txt .npy, or a .ply / .off / .obj without faces)"
 
 
@@ -117,6 +121,7 @@ def _unusual(mesh, tufted: bool) -> list[str]:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from hamsa.geodesic import GEODESIC_METHODS
     from hamsa.paper.benchmark import METHODS as BENCHMARK_METHODS
 
     parser = argparse.ArgumentParser(
@@ -206,7 +211,8 @@ def _parser() -> argparse.ArgumentParser:
         "--landmarks",
         nargs="+",
         metavar="S:T",
-        help="icskm: known pairs 'source_vertex:target_vertex' (0-based), e.g. --landmarks 12:40 300:310",
+        help="known pairs 'source_vertex:target_vertex' (0-based), e.g. --landmarks 12:40 300:310: needed by icskm; "
+        "fmap adds their heat kernel maps to its descriptors",
     )
     match.add_argument(
         "--landmark-scale",
@@ -242,6 +248,7 @@ def _parser() -> argparse.ArgumentParser:
         "with the curve to --scores",
     )
     match.add_argument("--points", type=_positive_int, default=1000, help="--truth: scored vertices (default 1000)")
+    match.add_argument("--geodesics", choices=GEODESIC_METHODS, default="heat", help=GEODESICS_HELP)
     match.add_argument("--scores", help="--truth: output .json (default: the output's name with .scores.json)")
     match.add_argument("--fmap", help="also save the functional map C (k x k, source rows) of the final map as .npy")
     match.add_argument(
@@ -300,6 +307,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
     bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
+    bench.add_argument("--geodesics", choices=GEODESIC_METHODS, default="heat", help=GEODESICS_HELP)
     bench.add_argument("--jobs", type=_positive_int, default=1, help="parallel worker processes (default 1)")
     bench.add_argument("--limit", type=_positive_int, help="at most this many pairs per class (a quick look)")
     bench.add_argument("--scheduler", help="Dask scheduler address: run the pairs on that cluster")
@@ -650,8 +658,8 @@ def _match(args) -> None:
 
     outputs = _match_outputs(args)
     start = time.perf_counter()
-    if args.method != "icskm" and args.landmarks:
-        raise HamsaError("--landmarks is for --method icskm")
+    if args.method not in ("icskm", "fmap") and args.landmarks:
+        raise HamsaError("--landmarks is for --method icskm or fmap")
     if (args.source_potential is None) != (args.target_potential is None):
         raise HamsaError("--source-potential and --target-potential go together (one potential per shape)")
     k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
@@ -662,14 +670,15 @@ def _match(args) -> None:
         loaded = [_load_for_operators(path, args.repair) for path in (args.source, args.target)]
         truth = _truth(args.truth, *loaded) if args.truth else None
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
-        landmarks = _landmark_pairs(args.landmarks, loaded) if args.method == "icskm" else None
+        wanted = args.method == "icskm" or args.landmarks  # (icskm needs them, fmap takes them)
+        landmarks = _landmark_pairs(args.landmarks, loaded) if wanted else None
         bases, basis = _match_bases(args, loaded, meshes, landmarks, k, step)
         step(f"matching ({args.method})")
         unit = {"fmap": "ZoomOut sizes", "icskm": "ICP runs"}.get(args.method, "")
         mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes, progress=step.counter(unit))
         if truth is not None:
             step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
-            scores = map_scores(meshes[1], mapping, truth, args.points)
+            scores = map_scores(meshes[1], mapping, truth, args.points, geodesics=args.geodesics)
     saved = _in_input_ids(mapping, *loaded) if any(item.vertex_ids is not None for item in loaded) else mapping
     if saved is not mapping:
         print(f"map in input vertex ids; {int(np.sum(saved < 0))} source vertices removed by --repair map to -1")
@@ -688,7 +697,8 @@ def _match(args) -> None:
             f"mean error {scores['mean_error']:.4f} (geodesic / sqrt(area), {scores['points']} vertices)"
         )
         with atomic_write(outputs["scores"], "w") as handle:
-            json.dump({**scores, "thresholds": THRESHOLDS.tolist(), "method": args.method, "basis": basis}, handle)
+            json.dump({**scores, "thresholds": THRESHOLDS.tolist(), "method": args.method, "basis": basis,
+                       "geodesics": args.geodesics}, handle)  # fmt: skip
     print("wrote           " + ", ".join(str(path) for path in outputs.values()))
 
 
@@ -832,6 +842,7 @@ def _benchmark_matching(args) -> None:
         oracle=args.oracle,
         draws=args.draws,
         landmark_scale=args.landmark_scale,
+        geodesics=args.geodesics,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")

@@ -5,9 +5,10 @@ source points, the error of a point is the geodesic distance on the TARGET betwe
 true images, divided by the square root of the target's area. The cumulative curve gives the
 fraction of points with error <= r for r in [0, 0.25]. "Symmetries are not allowed" (the paper): only
 the true map counts; ``symmetry=`` gives the symmetry-allowed variant (the smaller of the errors to the
-true image and to its left-right partner). Geodesics are the heat method's (:mod:`hamsa.geodesic`,
+true image and to its left-right partner). Geodesics are the heat method's by default (:mod:`hamsa.geodesic`,
 first-order accurate in the edge length; on a point cloud, the point-cloud heat method), batched over the
-distinct true images.
+distinct true images; ``geodesics="exact"`` uses the exact polyhedral distances the published curves use
+(the ``[geodesics]`` extra; docs/results/exact_geodesics.md measures the difference).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from hamsa.errors import HamsaError
-from hamsa.geodesic import GeodesicSolver, PointCloudGeodesicSolver, geodesic_solver
+from hamsa.geodesic import geodesic_solver
 from hamsa.pointcloud import as_shape
 
 THRESHOLDS = np.arange(0.0, 0.25 + 1e-12, 0.005)  # Kim et al.'s 0:0.005:0.25
@@ -34,8 +35,8 @@ def geodesic_errors(
     ground_truth,
     *,
     symmetry=None,
-    solver: GeodesicSolver | PointCloudGeodesicSolver | None = None,
-    batch: int = 64,
+    solver=None,
+    geodesics: str = "heat",
 ) -> np.ndarray:
     """Normalized geodesic errors ``d_target(predicted_i, truth_i) / sqrt(area(target))``, shape (s,).
 
@@ -45,7 +46,7 @@ def geodesic_errors(
     predicted, ground_truth : (s,) target vertex ids of the same s evaluated source points
     symmetry : (n_target,) optional left-right map of the target: symmetric flips then count as correct
     solver : a geodesic solver of ``target`` (:func:`hamsa.geodesic.geodesic_solver`) to reuse across calls
-    batch : distinct true images per batched heat-method solve
+    geodesics : ``"heat"`` or ``"exact"``: the solver built when none is given
     """
     target = as_shape(target)
     predicted = np.asarray(predicted)
@@ -56,13 +57,13 @@ def geodesic_errors(
     for name, ids in (("predicted", predicted), ("ground truth", truth)):
         if ids.size and (not np.issubdtype(ids.dtype, np.integer) or ids.min() < 0 or ids.max() >= n):
             raise HamsaError(f"{name} ids must be integers in [0, {n}) (target vertices)")
-    solver = solver or geodesic_solver(target)
-    errors = _distances(solver, predicted, truth, batch)
+    solver = solver or geodesic_solver(target, method=geodesics)
+    errors = solver.between(truth, predicted)
     if symmetry is not None:
         partner = np.asarray(symmetry)
         if partner.shape != (n,):
             raise HamsaError(f"symmetry map has shape {partner.shape}, the target has {n} vertices")
-        errors = np.minimum(errors, _distances(solver, predicted, partner[truth], batch))
+        errors = np.minimum(errors, solver.between(partner[truth], predicted))
     return errors / np.sqrt(target.area)
 
 
@@ -72,9 +73,10 @@ class TruthDistances:
     Comparing several predicted maps for the same points (methods, bases) costs one heat-method solve
     per true image instead of one per map: ``TruthDistances(target, truth).errors(predicted)`` equals
     ``geodesic_errors(target, predicted, truth)``. Memory: an (n_target, distinct true images) table.
+    ``solver`` / ``geodesics`` as in :func:`geodesic_errors`; ``batch``: true images per solve.
     """
 
-    def __init__(self, target, ground_truth, solver=None, batch: int = 64):
+    def __init__(self, target, ground_truth, solver=None, batch: int = 64, geodesics: str = "heat"):
         self.target = as_shape(target)
         self.truth = np.asarray(ground_truth)
         n = self.target.n_vertices
@@ -84,7 +86,7 @@ class TruthDistances:
         ):  # fmt: skip
             raise HamsaError(f"ground truth must be a 1-D array of target vertex ids in [0, {n})")
         unique, self._column = np.unique(self.truth, return_inverse=True)
-        solver = solver or geodesic_solver(self.target)
+        solver = solver or geodesic_solver(self.target, method=geodesics)
         self._table = np.hstack([solver.distances_from(unique[s : s + batch]) for s in range(0, len(unique), batch)])
 
     def errors(self, predicted) -> np.ndarray:
@@ -95,17 +97,6 @@ class TruthDistances:
         if predicted.size and (predicted.min() < 0 or predicted.max() >= self.target.n_vertices):
             raise HamsaError(f"predicted ids must be in [0, {self.target.n_vertices}) (target vertices)")
         return self._table[predicted, self._column] / np.sqrt(self.target.area)
-
-
-def _distances(solver, predicted: np.ndarray, truth: np.ndarray, batch: int) -> np.ndarray:
-    out = np.empty(len(truth))
-    unique, inverse = np.unique(truth, return_inverse=True)
-    for start in range(0, len(unique), batch):
-        chunk = unique[start : start + batch]
-        table = solver.distances_from(chunk)  # (n, b)
-        members = np.flatnonzero((inverse >= start) & (inverse < start + len(chunk)))
-        out[members] = table[predicted[members], inverse[members] - start]
-    return out
 
 
 def error_curve(errors, thresholds=THRESHOLDS) -> np.ndarray:
@@ -150,16 +141,19 @@ def evaluated_points(ground_truth, count: int = 1000, seed: int = 0) -> np.ndarr
     return known[sample_points(len(known), count, seed)]
 
 
-def map_scores(target, map_source_to_target, ground_truth, points: int = 1000, seed: int = 0) -> dict:
+def map_scores(
+    target, map_source_to_target, ground_truth, points: int = 1000, seed: int = 0, geodesics: str = "heat"
+) -> dict:
     """The Kim et al. scores of a point map: :func:`summary` of the geodesic errors at ``points`` source
     vertices (:func:`evaluated_points`), plus ``points`` (how many) and ``curve`` (the cumulative curve on
     :data:`THRESHOLDS`). ``map_source_to_target`` and ``ground_truth``: (n_s,) target ids, -1 in the
-    truth where unknown. What ``hamsa match --truth`` reports."""
+    truth where unknown; ``geodesics``: ``"heat"`` or ``"exact"`` (:func:`geodesic_errors`). What
+    ``hamsa match --truth`` reports."""
     mapping, truth = np.asarray(map_source_to_target), np.asarray(ground_truth)
     if mapping.shape != truth.shape:
         raise HamsaError(
             f"the map has shape {mapping.shape}, the ground truth {truth.shape}: one entry per source vertex"
         )
     chosen = evaluated_points(truth, points, seed)
-    errors = geodesic_errors(target, mapping[chosen], truth[chosen])
+    errors = geodesic_errors(target, mapping[chosen], truth[chosen], geodesics=geodesics)
     return {**summary(errors), "points": len(chosen), "curve": error_curve(errors).tolist()}

@@ -120,6 +120,7 @@ def evaluate_pair(
     oracle: bool = False,
     draws: int = 1,
     landmark_scale: float = 1.0,
+    geodesics: str = "heat",
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
@@ -132,7 +133,9 @@ def evaluate_pair(
     ground truth is otherwise used only to score (and, as always, for ``texture`` and the landmarks).
     ``landmark_scale``: the scale of the landmark potential, the geodesic distance from the landmarks in
     [0, 1]; on a unit-area shape the Laplacian eigenvalues are O(10)-O(1000) at k = 100, so a scale of 1
-    barely moves the basis and 10-100 starts to localize the low functions near the landmarks."""
+    barely moves the basis and 10-100 starts to localize the low functions near the landmarks.
+    ``geodesics``: the distances that score the maps, ``"heat"`` or ``"exact"``
+    (:func:`hamsa.evaluation.geodesic_errors`); the landmark potentials always use the heat method."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
@@ -142,7 +145,7 @@ def evaluate_pair(
         raise HamsaError(f"landmark_scale must be a positive number, got {landmark_scale}")
     candidates = np.flatnonzero(truth >= 0)
     chosen = evaluated_points(truth, points, seed)
-    distances = TruthDistances(target, truth[chosen])
+    distances = TruthDistances(target, truth[chosen], geodesics=geodesics)
     solve = _basis_solver(k, cache_dir)
     potential_of = _ORACLE_POTENTIAL_OF if oracle else _POTENTIAL_OF
     if all(method in potential_of for method in methods):  # the eigenfunction-sum Hamiltonian is not used
@@ -260,6 +263,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         oracle=settings.get("oracle", False),
         draws=settings.get("draws", 1),
         landmark_scale=settings.get("landmark_scale", 1.0),
+        geodesics=settings.get("geodesics", "heat"),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     save_record(path, record)
@@ -300,6 +304,7 @@ def benchmark_dataset(
     oracle: bool = False,
     draws: int = 1,
     landmark_scale: float = 1.0,
+    geodesics: str = "heat",
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -322,6 +327,7 @@ def benchmark_dataset(
     eigensum_scale : the hks/wks/fmap/sgfe matching potential's scale (:func:`paired_bases`)
     oracle : build the potentials from the ground truth, as the paper does (:func:`evaluate_pair`); the
         table's ``potentials`` field says which
+    geodesics : ``"heat"`` or ``"exact"`` distances for the scores (:func:`evaluate_pair`)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -339,6 +345,8 @@ def benchmark_dataset(
         settings["eigensum_scale"] = float(eigensum_scale)
     if oracle:
         settings["oracle"] = True
+    if geodesics != "heat":  # (likewise)
+        settings["geodesics"] = str(geodesics)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
@@ -352,6 +360,7 @@ def benchmark_dataset(
     records += [result for result in results if "error" not in result]
     table = summarize(records, dataset.name, dataset.classes)
     table["potentials"] = "oracle (from the ground truth)" if oracle else "estimated (no ground truth)"
+    table["geodesics"] = "exact (MMP)" if geodesics == "exact" else "heat method"
     failed = [result for result in results if "error" in result]
     if failed:
         table["failed"] = sorted(failed, key=lambda result: (result["source"], result["target"]))
@@ -411,6 +420,8 @@ def _mean_rows(records: list[dict], label: dict) -> list[dict]:
 def table_markdown(table: dict) -> str:
     """The summary as Markdown: one table per dataset, then one per class when there are several."""
     lines = [f"Hamiltonian potentials: {table['potentials']}.", ""] if "potentials" in table else []
+    if "geodesics" in table:
+        lines[-1:-1] = [f"Geodesic errors: {table['geodesics']}."]
     for key, rows in (("dataset", table["rows"]), ("class", table.get("by_class", []))):
         if not rows:
             continue
