@@ -2,11 +2,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import hamsa
 from hamsa import HamsaError, shapes
 from hamsa.eigen import generalized_eigsh
 from hamsa.interval import interval_operators
 from hamsa.operators import hamiltonian
-from hamsa.optimize import ReducedRepresentationProblem, optimize_potential
+from hamsa.optimize import ReducedRepresentationProblem, optimize_potential, representation_loss
 
 from conftest import data_mesh
 
@@ -123,3 +124,21 @@ def test_hand_reconstruction_error_halves():
     result = optimize_potential(mesh, mesh.vertices, 50, m=300, max_iterations=60)
     assert result.loss <= 0.5 * result.lbo_loss
     assert result.basis is not None and result.basis.k == 50
+
+
+def test_centring_removes_the_weighted_mean_and_makes_the_result_translation_invariant():
+    from hamsa.operators import mass_matrix
+
+    mesh = shapes.capsule(0.5, 2.0, 16)
+    a = mass_matrix(mesh).diagonal()
+    shifted = hamsa.TriMesh(mesh.vertices + [3.0, -1.0, 2.0], mesh.faces)
+    results = [optimize_potential(m, m.vertices, 8, m=40, max_iterations=15, center=True) for m in (mesh, shifted)]
+    np.testing.assert_allclose(results[0].mean, a @ mesh.vertices / a.sum(), rtol=1e-12)
+    np.testing.assert_allclose(results[1].mean - results[0].mean, [3.0, -1.0, 2.0], rtol=1e-12)
+    scale = np.abs(results[0].potential).max()
+    assert np.abs(results[1].potential - results[0].potential).max() < 1e-3 * scale  # (iterative solves: 2e-5)
+    assert results[0].loss == pytest.approx(
+        representation_loss(results[0].basis.vectors, a, mesh.vertices - results[0].mean), rel=1e-10
+    )
+    raw = [optimize_potential(m, m.vertices, 8, m=40, max_iterations=15) for m in (mesh, shifted)]
+    assert raw[0].mean is None and np.abs(raw[1].potential - raw[0].potential).max() > 0.1 * scale  # it matters

@@ -171,6 +171,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     optimize.add_argument("--iterations", type=_positive_int, default=100, help="L-BFGS iterations (default 100)")
     optimize.add_argument("--square", action="store_true", help="optimize V = v^2 >= 0 instead of a signed V")
+    optimize.add_argument(
+        "--center",
+        action="store_true",
+        help="remove the data's (area-weighted) mean first: the result no longer depends on where the shape sits",
+    )
     optimize.add_argument("-o", "--output", required=True, help="output .npy with the potential")
 
     compress = commands.add_parser("compress", help="spectral geometry compression (Karni-Gotsman / Hamiltonian)")
@@ -554,11 +559,13 @@ def _optimize(args) -> None:
         parametrization="square" if args.square else "signed",
         max_iterations=args.iterations,
         progress=sys.stderr.isatty() and not args.quiet,
+        center=args.center,
     )
     with atomic_write(output) as handle:
         np.save(handle, result.potential)
     print(
-        f"representation error with k = {args.k}: LBO {result.lbo_loss:.4g}, optimized Hamiltonian "
+        f"representation error{' of the centred data' if args.center else ''} with k = {args.k}: LBO "
+        f"{result.lbo_loss:.4g}, optimized Hamiltonian "
         f"{result.loss:.4g} ({result.ratio:.2f}x smaller)"
     )
     print(

@@ -53,6 +53,8 @@ class OptimizationResult:
     lbo_loss : float, the same loss with V = 0 (the Laplace-Beltrami basis)
     basis : Eigenbasis of the optimized Hamiltonian (k eigenpairs), or None for raw operators
     history : list of dicts (iteration, loss, gradient_norm, seconds), for the reduced problem
+    mean : (d,) or scalar column means removed from X first (``center=True``), else None; both losses
+        are then those of ``X - mean``, and X is represented as ``mean + Psi Psi^T A (X - mean)``
     """
 
     potential: np.ndarray
@@ -60,6 +62,7 @@ class OptimizationResult:
     lbo_loss: float
     basis: Eigenbasis | None
     history: list = field(default_factory=list)
+    mean: np.ndarray | None = None
 
     @property
     def ratio(self) -> float:
@@ -208,6 +211,7 @@ def optimize_potential(
     rounds: int = 1,
     epsilon: float = 1e-8,
     progress: bool = False,
+    center: bool = False,
 ) -> OptimizationResult:
     """The potential V minimizing ``||Psi_k Psi_k^T A X - X||_A^2`` (paper section 3), by L-BFGS from V = 0.
 
@@ -229,6 +233,11 @@ def optimize_potential(
         leave the LBO subspace and need several
     epsilon : stabilization of the eigenvalue differences (relative)
     progress : show a progress bar (tqdm when installed) on stderr
+    center : first subtract each column's mean (mass-weighted in the geometric setting), kept in
+        ``result.mean``. A Hamiltonian basis has no constant function, so raw coordinates make it spend
+        eigenvectors on their translation; with ``center`` the result does not depend on where the shape
+        sits. Whether the centred optimum represents X better depends on the shape (both ways at the
+        defaults, docs/results/optimize.md): off by default, as in the paper
 
     Returns
     -------
@@ -247,6 +256,9 @@ def optimize_potential(
     X = np.asarray(X, dtype=np.float64)
     if X.shape[0] != n or not np.all(np.isfinite(X)):
         raise HamsaError(f"X must be a finite array with {n} rows, got shape {X.shape}")
+    mean = (a @ X) / a.sum() if center else None
+    if center:
+        X = X - mean
     m = min(n, max(4 * k, k + 100)) if m is None else min(int(m), n)
     if not k < m:
         raise HamsaError(f"k = {k} must be smaller than m = {m}")
@@ -266,7 +278,7 @@ def optimize_potential(
         lbo_loss = subspace(np.zeros(n)).loss(np.zeros(n))
     values, vectors, _ = generalized_eigsh(W + A @ sp.diags(V), A, k, lower_bound=float(V.min()))
     basis = Eigenbasis(values, vectors, A, V) if mesh is not None and mass_weighted else None
-    return OptimizationResult(V, representation_loss(vectors, a, X), lbo_loss, basis, history)
+    return OptimizationResult(V, representation_loss(vectors, a, X), lbo_loss, basis, history, mean)
 
 
 def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, progress: bool):
