@@ -142,3 +142,18 @@ def test_centring_removes_the_weighted_mean_and_makes_the_result_translation_inv
     )
     raw = [optimize_potential(m, m.vertices, 8, m=40, max_iterations=15) for m in (mesh, shifted)]
     assert raw[0].mean is None and np.abs(raw[1].potential - raw[0].potential).max() > 0.1 * scale  # it matters
+
+
+@pytest.mark.parametrize("center", [False, True])
+def test_cli_optimize_writes_the_python_apis_potential(tmp_path, capsys, center):
+    from hamsa.cli import main
+
+    mesh = shapes.capsule(0.5, 2.0, 16)
+    hamsa.save_mesh(mesh, tmp_path / "capsule.off")
+    out = tmp_path / "V.npy"
+    command = ["optimize", str(tmp_path / "capsule.off"), "-k", "8", "-m", "40", "--iterations", "15", "-o", str(out)]
+    assert main(command + (["--center"] if center else [])) == 0
+    assert ("of the centred data" in capsys.readouterr().out) == center
+    loaded = hamsa.load_mesh(tmp_path / "capsule.off")
+    expected = optimize_potential(loaded, loaded.vertices, 8, m=40, max_iterations=15, center=center)
+    np.testing.assert_allclose(np.load(out), expected.potential, rtol=1e-10, atol=1e-12)

@@ -70,11 +70,12 @@ def _wks(source, target, landmarks, meshes, progress):
 
 
 def hks_functional_map(
-    source: Eigenbasis, target: Eigenbasis, k: int = START_K, landmarks=None
+    source: Eigenbasis, target: Eigenbasis, k: int = START_K, landmarks=None, commutativity_weight: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
     ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``. With ``landmarks`` (source ids,
-    target ids), their heat kernel maps (:func:`hamsa.diffusion.landmark_descriptors`) join the HKS."""
+    target ids), their heat kernel maps (:func:`hamsa.diffusion.landmark_descriptors`) join the HKS;
+    ``commutativity_weight``: that of :func:`functional_map` (0: the row-wise fit)."""
     from hamsa.diffusion import default_hks_times, heat_kernel_signature, landmark_descriptors
 
     small = source.truncate(k), target.truncate(k)
@@ -86,7 +87,7 @@ def hks_functional_map(
             np.hstack([d, landmark_descriptors(basis, ids, kernel_times)])
             for d, basis, ids in zip(descriptors, (source, target), landmarks)
         ]
-    return icp_refine(functional_map(*small, *descriptors), *small)
+    return icp_refine(functional_map(*small, *descriptors, commutativity_weight=commutativity_weight), *small)
 
 
 def _fmap(source, target, landmarks, meshes, progress):
