@@ -796,3 +796,22 @@ def test_cli_fmap_with_landmarks_equals_the_python_api(tmp_path, pair, capsys):
     np.testing.assert_array_equal(np.load(out), expected)
     wrong = hamsa.matching.match(*bases, "fmap", landmarks=(ids, ids[::-1]), meshes=meshes)
     assert not np.array_equal(wrong, expected)  # the landmarks are used: wrong ones change the map
+
+
+def test_hks_functional_map_passes_its_commutativity_weight_to_the_fit(pair):
+    from hamsa.diffusion import heat_kernel_signature
+    from hamsa.matching.pipeline import START_K, hks_functional_map
+
+    flat, rolled = pair
+    source, target = hamsa.eigenbasis(flat, 30), hamsa.eigenbasis(rolled, 30)
+    times = default_hks_times(source, 30)
+    F, G = (heat_kernel_signature(basis, times, scaled=True) for basis in (source, target))
+    small = source.truncate(START_K), target.truncate(START_K)
+    fitted = {}
+    for weight in (0.0, 0.1):
+        fitted[weight] = functional_map(*small, F, G, commutativity_weight=weight)
+        C, mapping = hks_functional_map(source, target, commutativity_weight=weight)
+        expected = icp_refine(fitted[weight], *small)
+        np.testing.assert_array_equal(C, expected[0])
+        np.testing.assert_array_equal(mapping, expected[1])
+    assert np.abs(fitted[0.1] - fitted[0.0]).max() > 1e-6  # the weight changes the fit
