@@ -15,36 +15,30 @@ process per pair).
 
 from __future__ import annotations
 
-import argparse
-import json
+import functools
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from scape_pairs import options, score_pairs
 
 import hamsa
-from hamsa.datasets import cached_eigenbasis, load_scape
+from hamsa.datasets import cached_eigenbasis
 from hamsa.evaluation import evaluated_points, summary
 from hamsa.geodesic import geodesic_solver
-from hamsa.paper.benchmark import dataset_pairs, identity_truth, match_pair
+from hamsa.paper.benchmark import match_pair
 
-SCAPE = Path(__file__).resolve().parents[2] / "shared" / "data" / "scape" / "meshes"
 METHODS = ("hks", "fmap")
 SCORES = ("auc", "within_0.05", "mean_error")
 
 
-def score_pair(dataset, source_name: str, target_name: str, k: int, points: int, cache: str) -> dict:
+def score_pair(source, target, truth, k: int, points: int, cache: str) -> dict:
     """Both methods' scores under both geodesics, the distance error, and the scoring times, for one pair."""
-    source, source_kept = dataset.load(source_name, largest_component=True)  # as benchmark-matching does
-    target, target_kept = dataset.load(target_name, largest_component=True)
-    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
-    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
     chosen = evaluated_points(truth, points)
     bases = (cached_eigenbasis(source, k, cache), cached_eigenbasis(target, k, cache))
     maps = {method: match_pair(method, *bases)[chosen] for method in METHODS}
-    record, distances, seconds = {"target": target_name}, {}, []
+    record, distances, seconds = {}, {}, []
     for kind in ("heat", "exact"):
         wall, cpu = time.perf_counter(), time.process_time()
         solver = geodesic_solver(target, method=kind)
@@ -64,28 +58,19 @@ def score_pair(dataset, source_name: str, target_name: str, k: int, points: int,
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = options(__doc__, k=50)
     parser.add_argument("--pairs", type=int, default=66, help="SCAPE pairs (mesh000 against the next ones)")
-    parser.add_argument("-k", type=int, default=50)
-    parser.add_argument("--points", type=int, default=1000)
-    parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("-o", "--output", help="also write the per-pair records as JSON")
     args = parser.parse_args(argv)
-    if not SCAPE.is_dir():
-        print(f"needs the SCAPE meshes at {SCAPE}")
-        return 1
-    import joblib
-
-    dataset = load_scape(SCAPE)
-    pairs = dataset_pairs(dataset)[: args.pairs]
-    start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="hamsa-bases-") as cache:
-        cached_eigenbasis(dataset.load(pairs[0][0], largest_component=True)[0].scaled_to_unit_area(), args.k, cache)
-        records = joblib.Parallel(n_jobs=args.jobs)(
-            joblib.delayed(score_pair)(dataset, s, t, args.k, args.points, cache) for s, t in pairs
+        records, seconds = score_pairs(
+            functools.partial(score_pair, k=args.k, points=args.points, cache=cache),
+            args.jobs,
+            args.pairs,
+            args.output,
+            prepare=lambda source: cached_eigenbasis(source, args.k, cache),  # the shared source, once
         )
     print(f"SCAPE, {len(records)} pairs, LBO k = {args.k}, {args.points} scored vertices, hamsa {hamsa.__version__}")
-    print(f"({time.perf_counter() - start:.0f} s with {args.jobs} job(s))\n")
+    print(f"({seconds:.0f} s with {args.jobs} job(s))\n")
     print("| method | geodesics | AUC | within 0.05 | mean error |")
     print("|---|---|---|---|---|")
     for method in METHODS:
@@ -102,12 +87,10 @@ def main(argv=None) -> int:
         error = [r[method]["relative_distance_error"] for r in records]
         print(f"\n{method}: heat-method distance error at the scored pairs, median over pairs {np.median(error):.4f}"
               f" (largest {np.max(error):.4f})")  # fmt: skip
-    seconds = np.array([r["seconds"] for r in records])  # (pairs, heat/exact, wall/cpu)
-    heat, exact = np.median(seconds[:, 0], axis=0), np.median(seconds[:, 1], axis=0)
+    times = np.array([r["seconds"] for r in records])  # (pairs, heat/exact, wall/cpu)
+    heat, exact = np.median(times[:, 0], axis=0), np.median(times[:, 1], axis=0)
     print(f"\nscoring both maps of a pair, median: heat {heat[0]:.2f} s wall / {heat[1]:.2f} s CPU, exact "
           f"{exact[0]:.2f} s wall / {exact[1]:.2f} s CPU (exact / heat: {exact[0] / heat[0]:.1f}x wall)")  # fmt: skip
-    if args.output:
-        Path(args.output).write_text(json.dumps(records, indent=1))
     return 0
 
 

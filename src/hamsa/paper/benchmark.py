@@ -245,11 +245,19 @@ def identity_truth(source_kept: np.ndarray, target_kept: np.ndarray, n_target_or
     return position[source_kept]
 
 
-def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: dict, path: Path) -> dict:
-    source, source_kept = dataset.load(source_name, largest_component=True)  # (as Kim et al.: loose pieces
-    target, target_kept = dataset.load(target_name, largest_component=True)  # dropped; TOSCA's gorilla)
-    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
+def load_pair(dataset: Dataset, source_name: str, target_name: str) -> tuple[TriMesh, TriMesh, np.ndarray]:
+    """``(source, target, ground_truth)`` as the dataset benchmark scores a pair: each shape reduced to its
+    largest connected component (as Kim et al.: loose pieces dropped, TOSCA's gorilla is the body alone)
+    and scaled to unit area, and the identity truth (within a class) carried through the vertices each side
+    kept, -1 where the source vertex's partner was dropped."""
+    source, source_kept = dataset.load(source_name, largest_component=True)
+    target, target_kept = dataset.load(target_name, largest_component=True)
     truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    return source.scaled_to_unit_area(), target.scaled_to_unit_area(), truth
+
+
+def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: dict, path: Path) -> dict:
+    source, target, truth = load_pair(dataset, source_name, target_name)
     result = evaluate_pair(
         source,
         target,
