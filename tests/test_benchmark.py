@@ -94,6 +94,9 @@ def test_cli_benchmark_matching(pose_dataset, tmp_path, capsys):
     lbo = [[row["mean_error"] for row in table["rows"] if row["basis"] == "lbo"] for table in (heat, exact)]
     assert lbo[0] != lbo[1] and np.allclose(lbo[0], lbo[1], rtol=0.1)  # the same map, measured exactly
     assert main(["benchmark-matching", str(tmp_path / "nowhere"), "-o", str(out)]) == 2
+    with pytest.raises(HamsaError, match="geodesics must be one of"):  # before any pair runs
+        benchmark_dataset(load_folder(pose_dataset), tmp_path / "bad", methods=("hks",), geodesics="dijkstra")
+    assert not (tmp_path / "bad").exists()
 
 
 def test_a_failing_pair_is_reported_and_the_others_still_run(pose_dataset, tmp_path, capsys):

@@ -47,7 +47,7 @@ from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summary
 from hamsa.files import atomic_write
-from hamsa.geodesic import geodesic_distance
+from hamsa.geodesic import GEODESIC_METHODS, geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
 from hamsa.mesh import TriMesh
 
@@ -340,6 +340,8 @@ def benchmark_dataset(
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise HamsaError(f"unknown matching methods {sorted(unknown)}; known: {', '.join(METHODS)}")
+    if geodesics not in GEODESIC_METHODS:  # (checked here, not once per pair in the workers)
+        raise HamsaError(f"geodesics must be one of {GEODESIC_METHODS}, got {geodesics!r}")
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
@@ -427,9 +429,9 @@ def _mean_rows(records: list[dict], label: dict) -> list[dict]:
 
 def table_markdown(table: dict) -> str:
     """The summary as Markdown: one table per dataset, then one per class when there are several."""
-    lines = [f"Hamiltonian potentials: {table['potentials']}.", ""] if "potentials" in table else []
-    if "geodesics" in table:
-        lines[-1:-1] = [f"Geodesic errors: {table['geodesics']}."]
+    notes = {"potentials": "Hamiltonian potentials", "geodesics": "Geodesic errors"}
+    lines = [f"{label}: {table[key]}." for key, label in notes.items() if key in table]
+    lines += [""] if lines else []
     for key, rows in (("dataset", table["rows"]), ("class", table.get("by_class", []))):
         if not rows:
             continue
