@@ -202,3 +202,24 @@ def test_landmark_scale_scales_only_the_landmark_hamiltonian(pose_dataset):
     assert plain[1]["basis"] == "hamiltonian" and plain[1] != scaled[1]
     with pytest.raises(HamsaError, match="landmark_scale"):
         evaluate_pair(source, target, identity, landmark_scale=0.0, **options)
+
+
+def test_the_commutativity_weight_reaches_the_fmap_start_and_is_named_in_the_table(pose_dataset, tmp_path):
+    from hamsa.paper.benchmark import load_pair
+
+    dataset = load_folder(pose_dataset)
+    table = benchmark_dataset(
+        dataset, tmp_path, methods=("fmap",), k=30, points=200, limit=1, progress=False, commutativity_weight=0.0
+    )
+    assert table["commutativity_weight"] == 0.0
+    assert "Descriptor-commutativity weight of the fmap / sgfe start: 0.0." in (tmp_path / "table.md").read_text()
+    expected = evaluate_pair(*load_pair(dataset, "humanoid0", "humanoid1"), k=30, methods=("fmap",), points=200,
+                             commutativity_weight=0.0)["rows"]  # fmt: skip
+    for row, reference in zip(table["rows"], expected):
+        for key in ("auc", "mean_error", "within_0.05"):
+            assert row[key] == pytest.approx(reference[key], rel=1e-12)
+    hks = benchmark_dataset(dataset, tmp_path / "hks", methods=("hks",), k=30, points=200, limit=1, progress=False)
+    assert "commutativity_weight" not in hks  # no functional-map start, no weight
+    with pytest.raises(HamsaError, match="commutativity weight must be finite"):  # before any pair runs
+        benchmark_dataset(dataset, tmp_path / "bad", methods=("fmap",), commutativity_weight=-1.0)
+    assert not (tmp_path / "bad").exists()

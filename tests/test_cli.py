@@ -40,6 +40,15 @@ def test_basis_writes_a_loadable_npz(mesh_file, tmp_path, capsys):
     np.testing.assert_allclose(basis.values, reference.values, rtol=1e-10)
 
 
+def test_basis_computes_100_pairs_by_default_as_match_does(mesh_file, tmp_path):
+    out = tmp_path / "basis.npz"
+    assert main(["basis", str(mesh_file), "-q", "-o", str(out)]) == 0
+    basis = hamsa.Eigenbasis.load(out)
+    reference = hamsa.eigenbasis(hamsa.load_mesh(mesh_file), 100)
+    assert basis.k == 100
+    np.testing.assert_allclose(basis.values, reference.values, rtol=1e-9, atol=1e-9)
+
+
 def test_basis_and_view_take_potential_specifications(mesh_file, tmp_path, capsys):
     """``--potential SPEC`` is :func:`hamsa.potentials.from_spec` on the mesh as read; a bad one exits 2."""
     from hamsa.potentials import from_spec

@@ -815,3 +815,28 @@ def test_hks_functional_map_passes_its_commutativity_weight_to_the_fit(pair):
         np.testing.assert_array_equal(C, expected[0])
         np.testing.assert_array_equal(mapping, expected[1])
     assert np.abs(fitted[0.1] - fitted[0.0]).max() > 1e-6  # the weight changes the fit
+
+
+def test_cli_match_commutativity_weight_is_that_of_the_python_api(tmp_path, capsys):
+    """``hamsa match --commutativity W`` gives ``match(..., commutativity_weight=W)``; without it, the default
+    weight; a negative weight is refused by the parser."""
+    from hamsa.cli import main
+    from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
+
+    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
+    hamsa.save_mesh(rest, tmp_path / "rest.off")
+    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "fmap", "-k", "24",
+               "--basis", "lbo", "-q"]  # fmt: skip
+    meshes = [m.scaled_to_unit_area() for m in (rest, walk)]
+    bases = [hamsa.eigenbasis(m, 24) for m in meshes]
+    for weight, extra in ((COMMUTATIVITY_WEIGHT, []), (0.0, ["--commutativity", "0"]), (1.0, ["--commutativity", "1"])):
+        out = tmp_path / f"map{weight}.npy"
+        assert main(command + extra + ["-o", str(out)]) == 0
+        expected = hamsa.matching.match(*bases, "fmap", commutativity_weight=weight)
+        np.testing.assert_array_equal(np.load(out), expected)
+    with pytest.raises(SystemExit):
+        main(command + ["--commutativity", "-1", "-o", str(tmp_path / "bad.npy")])
+    assert "expected a finite number >= 0" in capsys.readouterr().err
+    with pytest.raises(HamsaError, match="commutativity weight must be finite"):
+        hamsa.matching.match(*bases, "fmap", commutativity_weight=float("nan"))

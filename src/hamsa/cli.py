@@ -34,6 +34,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _nonnegative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {value}")
+    return value
+
+
 REPAIR_HELP = (
     "fix what has one right fix (duplicate or degenerate faces, non-manifold vertices, orientation, unreferenced "
     "vertices) and keep the largest connected component, instead of refusing the mesh"
@@ -51,6 +61,10 @@ POTENTIAL_HELP = (
 GEODESICS_HELP = (
     "distances that score the maps: heat (the heat method, fast, first-order accurate) or exact (polyhedral "
     "geodesics as in the published curves; the [geodesics] extra, much slower)"
+)
+COMMUTATIVITY_HELP = (
+    "descriptor-commutativity weight of the functional map that starts fmap (and sgfe): ||C M_g - M_f C||^2 over the "
+    "HKS columns (default {default:g}, chosen on half of the SCAPE pairs; 0: the plain descriptor fit)"
 )
 POINTS_HELP = "a point cloud (.xyz .pts .txt .npy, or a .ply / .off / .obj without faces)"
 
@@ -122,6 +136,7 @@ def _unusual(mesh, tufted: bool) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     from hamsa.geodesic import GEODESIC_METHODS
+    from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
     from hamsa.paper.benchmark import METHODS as BENCHMARK_METHODS
 
     parser = argparse.ArgumentParser(
@@ -137,7 +152,9 @@ def _parser() -> argparse.ArgumentParser:
     basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
     basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     basis.add_argument("--repair", action="store_true", help=REPAIR_HELP)
-    basis.add_argument("-k", type=_positive_int, required=True, help="number of eigenpairs")
+    basis.add_argument(
+        "-k", type=_positive_int, default=100, help="number of eigenpairs (default 100, as match and benchmark-matching)"
+    )
     basis.add_argument("--potential", help=POTENTIAL_HELP)
     basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
     basis.add_argument("--backend", choices=("auto", "cholmod", "superlu"), default="auto")
@@ -254,6 +271,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     match.add_argument("--points", type=_positive_int, default=1000, help="--truth: scored vertices (default 1000)")
     match.add_argument("--geodesics", choices=GEODESIC_METHODS, default="heat", help=GEODESICS_HELP)
+    match.add_argument(
+        "--commutativity",
+        type=_nonnegative_float,
+        default=COMMUTATIVITY_WEIGHT,
+        help=COMMUTATIVITY_HELP.format(default=COMMUTATIVITY_WEIGHT),
+    )
     match.add_argument("--scores", help="--truth: output .json (default: the output's name with .scores.json)")
     match.add_argument("--fmap", help="also save the functional map C (k x k, source rows) of the final map as .npy")
     match.add_argument(
@@ -313,6 +336,12 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("-k", type=_positive_int, default=100, help="eigenpairs per basis (default 100)")
     bench.add_argument("--points", type=_positive_int, default=1000, help="evaluated vertices per pair (default 1000)")
     bench.add_argument("--geodesics", choices=GEODESIC_METHODS, default="heat", help=GEODESICS_HELP)
+    bench.add_argument(
+        "--commutativity",
+        type=_nonnegative_float,
+        default=COMMUTATIVITY_WEIGHT,
+        help=COMMUTATIVITY_HELP.format(default=COMMUTATIVITY_WEIGHT),
+    )
     bench.add_argument("--jobs", type=_positive_int, default=1, help="parallel worker processes (default 1)")
     bench.add_argument("--limit", type=_positive_int, help="at most this many pairs per class (a quick look)")
     bench.add_argument("--scheduler", help="Dask scheduler address: run the pairs on that cluster")
@@ -682,7 +711,14 @@ def _match(args) -> None:
         bases, basis = _match_bases(args, loaded, meshes, landmarks, k, step)
         step(f"matching ({args.method})")
         unit = {"fmap": "ZoomOut sizes", "icskm": "ICP runs"}.get(args.method, "")
-        mapping = match(*bases, args.method, landmarks=landmarks, meshes=meshes, progress=step.counter(unit))
+        mapping = match(
+            *bases,
+            args.method,
+            landmarks=landmarks,
+            meshes=meshes,
+            progress=step.counter(unit),
+            commutativity_weight=args.commutativity,
+        )
         if truth is not None:
             step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
             scores = map_scores(meshes[1], mapping, truth, args.points, geodesics=args.geodesics)
@@ -850,6 +886,7 @@ def _benchmark_matching(args) -> None:
         draws=args.draws,
         landmark_scale=args.landmark_scale,
         geodesics=args.geodesics,
+        commutativity_weight=args.commutativity,
     )
     print(table_markdown(table), end="")
     print(f"wrote {output / 'table.md'}, {output / 'table.json'} and {output / 'curves.png'}")

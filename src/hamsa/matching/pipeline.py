@@ -14,16 +14,25 @@ from hamsa.matching.sgfe import match_sgfe
 METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
 # the functional map that starts fmap and sgfe is fitted on this many eigenpairs
 START_K = 20
+# and with this descriptor-commutativity weight (chosen on half of the SCAPE pairs, docs/results/matching.md)
+COMMUTATIVITY_WEIGHT = 0.03
 
 
 def match(
-    source: Eigenbasis, target: Eigenbasis, method: str = "fmap", *, landmarks=None, meshes=None, progress=None
+    source: Eigenbasis,
+    target: Eigenbasis,
+    method: str = "fmap",
+    *,
+    landmarks=None,
+    meshes=None,
+    progress=None,
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
 ) -> np.ndarray:
     """``map_source_to_target`` (n_s,): for each source vertex, a target vertex, by one of :data:`METHODS`.
 
     - ``hks`` / ``wks``: nearest neighbours of 50 heat / wave kernel signature columns;
-    - ``fmap``: an HKS-fitted functional map on the first 20 eigenpairs (with ``landmarks``, their heat
-      kernel maps as further descriptors), ICP, then ZoomOut up to k;
+    - ``fmap``: an HKS-fitted functional map on the first 20 eigenpairs (:func:`hks_functional_map`; with
+      ``landmarks``, their heat kernel maps as further descriptors), ICP, then ZoomOut up to k;
     - ``sgfe``: the spectral gradient fields embedding (:func:`~hamsa.matching.match_sgfe`) from that
       functional map (needs ``meshes``);
     - ``icskm``: iterative closest spectral kernel maps (:func:`~hamsa.matching.match_icskm`) from
@@ -40,6 +49,8 @@ def match(
         method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
     progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), ICSKM's ICP
         runs (``icskm``, ``icskm_geo``); the other methods do not call it
+    commutativity_weight : the descriptor-commutativity weight of the functional map that starts ``fmap``
+        and ``sgfe`` (:func:`~hamsa.matching.functional_map`; 0: the row-wise fit); the other methods ignore it
 
     Raises
     ------
@@ -48,10 +59,12 @@ def match(
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-    return _MATCHERS[method](source, target, landmarks, meshes, progress)
+    if not np.isfinite(commutativity_weight) or commutativity_weight < 0:
+        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {commutativity_weight}")
+    return _MATCHERS[method](source, target, landmarks, meshes, progress, commutativity_weight)
 
 
-def _hks(source, target, landmarks, meshes, progress):
+def _hks(source, target, landmarks, meshes, progress, commutativity_weight):
     from hamsa.diffusion import default_hks_times, heat_kernel_signature
 
     times = default_hks_times(source, 50)
@@ -60,7 +73,7 @@ def _hks(source, target, landmarks, meshes, progress):
     )
 
 
-def _wks(source, target, landmarks, meshes, progress):
+def _wks(source, target, landmarks, meshes, progress, commutativity_weight):
     from hamsa.diffusion import default_wks_energies, wave_kernel_signature
 
     energies, sigma = default_wks_energies(source, 50)
@@ -70,7 +83,11 @@ def _wks(source, target, landmarks, meshes, progress):
 
 
 def hks_functional_map(
-    source: Eigenbasis, target: Eigenbasis, k: int = START_K, landmarks=None, commutativity_weight: float = 0.0
+    source: Eigenbasis,
+    target: Eigenbasis,
+    k: int = START_K,
+    landmarks=None,
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
     ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``. With ``landmarks`` (source ids,
@@ -90,27 +107,27 @@ def hks_functional_map(
     return icp_refine(functional_map(*small, *descriptors, commutativity_weight=commutativity_weight), *small)
 
 
-def _fmap(source, target, landmarks, meshes, progress):
-    _, initial = hks_functional_map(source, target, landmarks=landmarks)
+def _fmap(source, target, landmarks, meshes, progress, commutativity_weight):
+    _, initial = hks_functional_map(source, target, landmarks=landmarks, commutativity_weight=commutativity_weight)
     return zoomout(initial, source, target, range(START_K, min(source.k, target.k) + 1, 4), progress)[1]
 
 
-def _sgfe(source, target, landmarks, meshes, progress):
+def _sgfe(source, target, landmarks, meshes, progress, commutativity_weight):
     if meshes is None:
         raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
-    C, _ = hks_functional_map(source, target)
+    C, _ = hks_functional_map(source, target, commutativity_weight=commutativity_weight)
     start = np.eye(source.k)
     start[:START_K, :START_K] = C
     return match_sgfe(*meshes, source, target, start)[1]
 
 
-def _icskm(source, target, landmarks, meshes, progress, features=None):
+def _icskm(source, target, landmarks, meshes, progress, commutativity_weight, features=None):
     if landmarks is None:
         raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
     return match_icskm(source, target, *landmarks, features=features, progress=progress)[1]
 
 
-def _icskm_geo(source, target, landmarks, meshes, progress):
+def _icskm_geo(source, target, landmarks, meshes, progress, commutativity_weight):
     from hamsa.geodesic import geodesic_solver
 
     if landmarks is None:
@@ -120,7 +137,7 @@ def _icskm_geo(source, target, landmarks, meshes, progress):
     features = tuple(
         geodesic_solver(shape).distances_from(ids, unreachable="farthest") for shape, ids in zip(meshes, landmarks)
     )
-    return _icskm(source, target, landmarks, meshes, progress, features)
+    return _icskm(source, target, landmarks, meshes, progress, commutativity_weight, features)
 
 
 _MATCHERS = {"hks": _hks, "wks": _wks, "fmap": _fmap, "sgfe": _sgfe, "icskm": _icskm, "icskm_geo": _icskm_geo}

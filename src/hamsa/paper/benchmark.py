@@ -49,6 +49,7 @@ from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summ
 from hamsa.files import atomic_write
 from hamsa.geodesic import GEODESIC_METHODS, geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
+from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
@@ -62,12 +63,15 @@ BASES = ("lbo", "hamiltonian")
 SCORES = ("auc", "mean_error", "within_0.05")
 
 
-def match_pair(method: str, source, target, landmarks=None, meshes=None) -> np.ndarray:
+def match_pair(
+    method: str, source, target, landmarks=None, meshes=None, commutativity_weight: float = COMMUTATIVITY_WEIGHT
+) -> np.ndarray:
     """``map_source_to_target`` by one of :data:`METHODS` (:func:`hamsa.matching.match`; ``texture`` is HKS
     matching, its difference being the potential of its Hamiltonian basis)."""
     if method not in METHODS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-    return match(source, target, "hks" if method == "texture" else method, landmarks=landmarks, meshes=meshes)
+    method = "hks" if method == "texture" else method
+    return match(source, target, method, landmarks=landmarks, meshes=meshes, commutativity_weight=commutativity_weight)
 
 
 def paired_bases(
@@ -121,6 +125,7 @@ def evaluate_pair(
     draws: int = 1,
     landmark_scale: float = 1.0,
     geodesics: str = "heat",
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
@@ -135,7 +140,9 @@ def evaluate_pair(
     [0, 1]; on a unit-area shape the Laplacian eigenvalues are O(10)-O(1000) at k = 100, so a scale of 1
     barely moves the basis and 10-100 starts to localize the low functions near the landmarks.
     ``geodesics``: the distances that score the maps, ``"heat"`` or ``"exact"``
-    (:func:`hamsa.evaluation.geodesic_errors`); the landmark potentials always use the heat method."""
+    (:func:`hamsa.evaluation.geodesic_errors`); the landmark potentials always use the heat method.
+    ``commutativity_weight``: that of the functional map starting ``fmap`` and ``sgfe``
+    (:func:`hamsa.matching.match`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
@@ -179,7 +186,7 @@ def evaluate_pair(
                     pair = hamiltonians[potential_of[method]]
                 else:
                     pair = bases[basis]
-                mapping = match_pair(method, *pair, landmarks=pairs, meshes=(source, target))
+                mapping = match_pair(method, *pair, pairs, (source, target), commutativity_weight)
                 pooled.append(distances.errors(mapping[chosen]))
             errors = np.concatenate(pooled)
             rows.append({"method": method, "basis": basis, **summary(errors)})
@@ -272,6 +279,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         draws=settings.get("draws", 1),
         landmark_scale=settings.get("landmark_scale", 1.0),
         geodesics=settings.get("geodesics", "heat"),
+        commutativity_weight=settings.get("commutativity_weight", COMMUTATIVITY_WEIGHT),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     save_record(path, record)
@@ -313,6 +321,7 @@ def benchmark_dataset(
     draws: int = 1,
     landmark_scale: float = 1.0,
     geodesics: str = "heat",
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -336,12 +345,15 @@ def benchmark_dataset(
     oracle : build the potentials from the ground truth, as the paper does (:func:`evaluate_pair`); the
         table's ``potentials`` field says which
     geodesics : ``"heat"`` or ``"exact"`` distances for the scores (:func:`evaluate_pair`)
+    commutativity_weight : that of the functional map starting ``fmap`` and ``sgfe`` (:func:`evaluate_pair`)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise HamsaError(f"unknown matching methods {sorted(unknown)}; known: {', '.join(METHODS)}")
     if geodesics not in GEODESIC_METHODS:  # (checked here, not once per pair in the workers)
         raise HamsaError(f"geodesics must be one of {GEODESIC_METHODS}, got {geodesics!r}")
+    if not (np.isfinite(commutativity_weight) and commutativity_weight >= 0):
+        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {commutativity_weight}")
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
@@ -357,6 +369,8 @@ def benchmark_dataset(
         settings["oracle"] = True
     if geodesics != "heat":  # (likewise)
         settings["geodesics"] = str(geodesics)
+    if {"fmap", "sgfe"} & set(methods):  # (always: results from before its default was 0.03 had none)
+        settings["commutativity_weight"] = float(commutativity_weight)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
@@ -371,6 +385,8 @@ def benchmark_dataset(
     table = summarize(records, dataset.name, dataset.classes)
     table["potentials"] = "oracle (from the ground truth)" if oracle else "estimated (no ground truth)"
     table["geodesics"] = "exact (MMP)" if geodesics == "exact" else "heat method"
+    if "commutativity_weight" in settings:
+        table["commutativity_weight"] = settings["commutativity_weight"]
     failed = [result for result in results if "error" in result]
     if failed:
         table["failed"] = sorted(failed, key=lambda result: (result["source"], result["target"]))
@@ -429,7 +445,11 @@ def _mean_rows(records: list[dict], label: dict) -> list[dict]:
 
 def table_markdown(table: dict) -> str:
     """The summary as Markdown: one table per dataset, then one per class when there are several."""
-    notes = {"potentials": "Hamiltonian potentials", "geodesics": "Geodesic errors"}
+    notes = {
+        "potentials": "Hamiltonian potentials",
+        "geodesics": "Geodesic errors",
+        "commutativity_weight": "Descriptor-commutativity weight of the fmap / sgfe start",
+    }
     lines = [f"{label}: {table[key]}." for key, label in notes.items() if key in table]
     lines += [""] if lines else []
     for key, rows in (("dataset", table["rows"]), ("class", table.get("by_class", []))):
