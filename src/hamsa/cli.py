@@ -153,7 +153,7 @@ def _parser() -> argparse.ArgumentParser:
     basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     basis.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     basis.add_argument(
-        "-k", type=_positive_int, default=100, help="number of eigenpairs (default 100, as match and benchmark-matching)"
+        "-k", type=_positive_int, default=100, help="number of eigenpairs (default 100, as match, benchmark-matching)"
     )
     basis.add_argument("--potential", help=POTENTIAL_HELP)
     basis.add_argument("--mass", choices=("voronoi", "barycentric", "full"), default="voronoi")
