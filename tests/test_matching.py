@@ -840,3 +840,24 @@ def test_cli_match_commutativity_weight_is_that_of_the_python_api(tmp_path, caps
     assert "expected a finite number >= 0" in capsys.readouterr().err
     with pytest.raises(HamsaError, match="commutativity weight must be finite"):
         hamsa.matching.match(*bases, "fmap", commutativity_weight=float("nan"))
+
+
+def test_cli_match_sgfe_is_the_python_api_and_reports_its_icp_iterations(tmp_path):
+    from hamsa.cli import main
+
+    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
+    hamsa.save_mesh(rest, tmp_path / "rest.off")
+    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    out = tmp_path / "map.npy"
+    command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "sgfe", "-k", "24",
+               "--basis", "lbo", "-q", "-o", str(out)]  # fmt: skip
+    assert main(command) == 0
+    meshes = [m.scaled_to_unit_area() for m in (rest, walk)]
+    bases = [hamsa.eigenbasis(m, 24) for m in meshes]
+    calls = []
+    expected = hamsa.matching.match(*bases, "sgfe", meshes=meshes, progress=lambda *a: calls.append(a))
+    np.testing.assert_array_equal(np.load(out), expected)
+    assert calls and calls[-1] == (20, 20) and all(done <= total == 20 for done, total in calls)
+    clouds = [hamsa.PointCloud(m.vertices) for m in meshes]
+    with pytest.raises(HamsaError, match="sgfe needs triangle meshes"):
+        hamsa.matching.match(*bases, "sgfe", meshes=clouds)

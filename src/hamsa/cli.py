@@ -224,10 +224,11 @@ def _parser() -> argparse.ArgumentParser:
     match.add_argument("target", help=f"target mesh file or {POINTS_HELP}")
     match.add_argument(
         "--method",
-        choices=("fmap", "hks", "wks", "icskm"),
+        choices=("fmap", "hks", "wks", "icskm", "sgfe"),
         default="fmap",
         help="fmap: HKS-fitted functional map + ICP + ZoomOut (default); hks / wks: descriptor nearest neighbours; "
-        "icskm: iterative closest spectral kernel maps from --landmarks",
+        "icskm: iterative closest spectral kernel maps from --landmarks; sgfe: spectral gradient fields embedding "
+        "from the fmap start (triangle meshes only)",
     )
     match.add_argument(
         "--landmarks",
@@ -247,8 +248,8 @@ def _parser() -> argparse.ArgumentParser:
         "--basis",
         choices=("hamiltonian", "lbo"),
         default="hamiltonian",
-        help="fmap, hks, wks: the Hamiltonian basis with the paper's matching potential (sum of phi_2..phi_5, its "
-        "signs made consistent from the shapes alone, no ground truth; default) or the plain LBO basis",
+        help="fmap, hks, wks, sgfe: the Hamiltonian basis with the paper's matching potential (sum of phi_2..phi_5, "
+        "its signs made consistent from the shapes alone, no ground truth; default) or the plain LBO basis",
     )
     match.add_argument(
         "--repair",
@@ -691,6 +692,7 @@ def _match(args) -> None:
     from hamsa.evaluation import THRESHOLDS, map_scores
     from hamsa.files import atomic_write
     from hamsa.matching import functional_from_map, match
+    from hamsa.matching.pipeline import START_K
 
     outputs = _match_outputs(args)
     start = time.perf_counter()
@@ -698,7 +700,8 @@ def _match(args) -> None:
         raise HamsaError("--landmarks is for --method icskm or fmap")
     if (args.source_potential is None) != (args.target_potential is None):
         raise HamsaError("--source-potential and --target-potential go together (one potential per shape)")
-    k = max(args.k, 60) if args.method == "wks" else max(args.k, 20) if args.method == "fmap" else args.k
+    least = {"wks": 60, "fmap": START_K, "sgfe": START_K}.get(args.method, 1)  # (the start map's size)
+    k = max(args.k, least)
     if k != args.k:
         print(f"-k {args.k} is too few for {args.method}: using k = {k}", file=sys.stderr)
     with _Steps(args, 7) as step:
@@ -710,7 +713,7 @@ def _match(args) -> None:
         landmarks = _landmark_pairs(args.landmarks, loaded) if wanted else None
         bases, basis = _match_bases(args, loaded, meshes, landmarks, k, step)
         step(f"matching ({args.method})")
-        unit = {"fmap": "ZoomOut sizes", "icskm": "ICP runs"}.get(args.method, "")
+        unit = {"fmap": "ZoomOut sizes", "icskm": "ICP runs", "sgfe": "ICP iterations"}.get(args.method, "")
         mapping = match(
             *bases,
             args.method,

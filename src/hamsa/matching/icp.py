@@ -27,19 +27,26 @@ def alternate(
     fit: Callable[[np.ndarray], np.ndarray],
     iterations: int,
     mapping: np.ndarray | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """ICP from C: up to ``iterations`` times, ``new = nearest(C)``; stop if it equals the current map,
     else adopt it and refit ``C = fit(new)``.
 
     ``mapping`` is the map a previous call ended with (so a call that finds it unchanged at once does
-    nothing). Returns ``(C, mapping, fits)``: C is fitted to ``mapping`` whenever ``fits > 0``.
+    nothing). ``progress(done, iterations)`` is called after each iteration, and with ``done = iterations``
+    when the map stops changing earlier. Returns ``(C, mapping, fits)``: C is fitted to ``mapping``
+    whenever ``fits > 0``.
     """
     fits = 0
-    for _ in range(iterations):
+    for done in range(1, iterations + 1):
         new = nearest(C)
         if mapping is not None and np.array_equal(new, mapping):
             break
         mapping = new
         C = fit(mapping)
         fits += 1
+        if progress is not None and done < iterations:
+            progress(done, iterations)
+    if progress is not None and iterations > 0:
+        progress(iterations, iterations)
     return C, mapping, fits

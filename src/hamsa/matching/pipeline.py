@@ -10,6 +10,7 @@ from hamsa.matching.functional import functional_map, icp_refine, zoomout
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
+from hamsa.pointcloud import PointCloud
 
 METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
 # the functional map that starts fmap and sgfe is fitted on this many eigenpairs
@@ -47,8 +48,9 @@ def match(
     landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``; optional for ``fmap``
     meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``. Every other
         method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
-    progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), ICSKM's ICP
-        runs (``icskm``, ``icskm_geo``); the other methods do not call it
+    progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), SGFE's ICP
+        iterations (``sgfe``), ICSKM's ICP runs (``icskm``, ``icskm_geo``); the descriptor methods do not
+        call it
     commutativity_weight : the descriptor-commutativity weight of the functional map that starts ``fmap``
         and ``sgfe`` (:func:`~hamsa.matching.functional_map`; 0: the row-wise fit); the other methods ignore it
 
@@ -115,10 +117,12 @@ def _fmap(source, target, landmarks, meshes, progress, commutativity_weight):
 def _sgfe(source, target, landmarks, meshes, progress, commutativity_weight):
     if meshes is None:
         raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
+    if any(isinstance(shape, PointCloud) for shape in meshes):
+        raise HamsaError("sgfe needs triangle meshes (its gradients are per face), not point clouds: use fmap")
     C, _ = hks_functional_map(source, target, commutativity_weight=commutativity_weight)
     start = np.eye(source.k)
     start[:START_K, :START_K] = C
-    return match_sgfe(*meshes, source, target, start)[1]
+    return match_sgfe(*meshes, source, target, start, progress=progress)[1]
 
 
 def _icskm(source, target, landmarks, meshes, progress, commutativity_weight, features=None):

@@ -58,6 +58,7 @@ def match_sgfe(
     iterations: int = 20,
     sample: int = 3000,
     seed: int = 0,
+    progress=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Spectral gradient fields embedding (Shtern & Kimmel 2015): ICP on eigenfunction values and gradients.
 
@@ -68,7 +69,8 @@ def match_sgfe(
     (gradient_k, gradient_k) block; ICP (:func:`hamsa.matching.icp.alternate`) alternates nearest
     neighbours in the concatenated embedding (``weight`` on the gradient part) and the Procrustes C of the
     value part, from ``initial_C`` (e.g. an HKS functional map after :func:`~hamsa.matching.icp_refine`,
-    padded to k), on ``sample`` seeded source vertices.
+    padded to k), on ``sample`` seeded source vertices. ``progress(done, iterations)``: optional, after each
+    ICP iteration (:func:`~hamsa.matching.icp.alternate`).
 
     Returns
     -------
@@ -99,5 +101,5 @@ def match_sgfe(
     def nearest(C):
         return nearest_in(tree, embedded(C, rows))
 
-    C, _, _ = alternate(np.asarray(initial_C, dtype=np.float64), nearest, fit, iterations)
+    C, _, _ = alternate(np.asarray(initial_C, dtype=np.float64), nearest, fit, iterations, progress=progress)
     return C, nearest_in(tree, embedded(C))
