@@ -605,13 +605,19 @@ def test_cli_match_with_given_potentials_and_truth_equals_the_python_api(tmp_pat
     assert written["auc"] > 0.8  # a foot landmark on both poses: measured 0.95
 
 
+def coarse_poses(folder):
+    """The coarse built-in humanoid at rest and walking, also written to ``folder`` as rest.off and walk.off."""
+    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
+    hamsa.save_mesh(rest, folder / "rest.off")
+    hamsa.save_mesh(walk, folder / "walk.off")
+    return rest, walk
+
+
 def test_cli_match_scores_with_exact_geodesics_as_the_python_api(tmp_path):
     from hamsa.cli import main
     from hamsa.evaluation import map_scores
 
-    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
-    hamsa.save_mesh(rest, tmp_path / "rest.off")
-    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    rest, walk = coarse_poses(tmp_path)
     out = tmp_path / "map.npy"
     command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "hks", "-k", "20",
                "--basis", "lbo", "--truth", "identity", "--points", "200", "-q", "-o", str(out)]  # fmt: skip
@@ -823,9 +829,7 @@ def test_cli_match_commutativity_weight_is_that_of_the_python_api(tmp_path, caps
     from hamsa.cli import main
     from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
 
-    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
-    hamsa.save_mesh(rest, tmp_path / "rest.off")
-    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    rest, walk = coarse_poses(tmp_path)
     command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "fmap", "-k", "24",
                "--basis", "lbo", "-q"]  # fmt: skip
     meshes = [m.scaled_to_unit_area() for m in (rest, walk)]
@@ -845,9 +849,7 @@ def test_cli_match_commutativity_weight_is_that_of_the_python_api(tmp_path, caps
 def test_cli_match_sgfe_is_the_python_api_and_reports_its_icp_iterations(tmp_path):
     from hamsa.cli import main
 
-    rest, walk = shapes.humanoid("rest", spacing=0.06), shapes.humanoid("walk", spacing=0.06)
-    hamsa.save_mesh(rest, tmp_path / "rest.off")
-    hamsa.save_mesh(walk, tmp_path / "walk.off")
+    rest, walk = coarse_poses(tmp_path)
     out = tmp_path / "map.npy"
     command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "sgfe", "-k", "24",
                "--basis", "lbo", "-q", "-o", str(out)]  # fmt: skip
