@@ -27,17 +27,18 @@ import hamsa
 from hamsa.datasets import cached_eigenbasis
 from hamsa.evaluation import evaluated_points, summary
 from hamsa.geodesic import geodesic_solver
+from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
 from hamsa.paper.benchmark import match_pair
 
 METHODS = ("hks", "fmap")
 SCORES = ("auc", "within_0.05", "mean_error")
 
 
-def score_pair(source, target, truth, k: int, points: int, cache: str) -> dict:
+def score_pair(source, target, truth, k: int, points: int, cache: str, commutativity: float) -> dict:
     """Both methods' scores under both geodesics, the distance error, and the scoring times, for one pair."""
     chosen = evaluated_points(truth, points)
     bases = (cached_eigenbasis(source, k, cache), cached_eigenbasis(target, k, cache))
-    maps = {method: match_pair(method, *bases)[chosen] for method in METHODS}
+    maps = {method: match_pair(method, *bases, commutativity_weight=commutativity)[chosen] for method in METHODS}
     record, distances, seconds = {}, {}, []
     for kind in ("heat", "exact"):
         wall, cpu = time.perf_counter(), time.process_time()
@@ -60,10 +61,13 @@ def score_pair(source, target, truth, k: int, points: int, cache: str) -> dict:
 def main(argv=None) -> int:
     parser = options(__doc__, k=50)
     parser.add_argument("--pairs", type=int, default=66, help="SCAPE pairs (mesh000 against the next ones)")
+    parser.add_argument(
+        "--commutativity", type=float, default=COMMUTATIVITY_WEIGHT, help="fmap's start-map commutativity weight"
+    )
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="hamsa-bases-") as cache:
         records, seconds = score_pairs(
-            functools.partial(score_pair, k=args.k, points=args.points, cache=cache),
+            functools.partial(score_pair, k=args.k, points=args.points, cache=cache, commutativity=args.commutativity),
             args.jobs,
             args.pairs,
             args.output,
