@@ -61,9 +61,14 @@ def match(
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-    if not np.isfinite(commutativity_weight) or commutativity_weight < 0:
-        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {commutativity_weight}")
+    check_commutativity_weight(commutativity_weight)
     return _MATCHERS[method](source, target, landmarks, meshes, progress, commutativity_weight)
+
+
+def check_commutativity_weight(weight: float) -> None:
+    """Raise a HamsaError unless ``weight`` is a finite number >= 0 (the start map's commutativity weight)."""
+    if not (np.isfinite(weight) and weight >= 0):
+        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {weight}")
 
 
 def _hks(source, target, landmarks, meshes, progress, commutativity_weight):

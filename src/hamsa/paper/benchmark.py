@@ -49,7 +49,7 @@ from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summ
 from hamsa.files import atomic_write
 from hamsa.geodesic import GEODESIC_METHODS, geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
-from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
+from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT, check_commutativity_weight
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
@@ -352,8 +352,7 @@ def benchmark_dataset(
         raise HamsaError(f"unknown matching methods {sorted(unknown)}; known: {', '.join(METHODS)}")
     if geodesics not in GEODESIC_METHODS:  # (checked here, not once per pair in the workers)
         raise HamsaError(f"geodesics must be one of {GEODESIC_METHODS}, got {geodesics!r}")
-    if not (np.isfinite(commutativity_weight) and commutativity_weight >= 0):
-        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {commutativity_weight}")
+    check_commutativity_weight(commutativity_weight)  # (likewise)
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
