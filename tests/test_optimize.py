@@ -40,12 +40,14 @@ def _cases():
 
 @pytest.mark.parametrize("case", list(_cases()))
 @pytest.mark.parametrize("square", [False, True])
-def test_gradient_equals_finite_differences(case, square):
+@pytest.mark.parametrize("smoothed", [False, True])
+def test_gradient_equals_finite_differences(case, square, smoothed):
     W, A, X = _cases()[case]
     problem = _problem(W, A, X, k=10)
     rng = np.random.default_rng(1)
     n = W.shape[0]
     scale = np.diag(problem.stiffness)[10]  # the 11th LBO eigenvalue
+    problem.width = 0.1 * scale if smoothed else 0.0
     v = rng.random(n) * np.sqrt(scale) if square else (rng.random(n) - 0.3) * scale
     to_V = (lambda v: v**2) if square else (lambda v: v)
     loss, gradient = problem.loss_and_gradient(to_V(v))
@@ -55,6 +57,23 @@ def test_gradient_equals_finite_differences(case, square):
         direction = rng.standard_normal(n)
         fd = _directional_fd(lambda y: problem.loss(to_V(y)), v, direction, 1e-4 * np.abs(v).max())
         assert gradient @ direction == pytest.approx(fd, rel=1e-5)
+
+
+def test_the_soft_top_k_keeps_a_budget_of_k_and_becomes_the_papers_loss_as_the_width_shrinks():
+    W, A, X = _cases()["mesh, mass-weighted"]
+    problem = _problem(W, A, X, k=10)
+    V = np.random.default_rng(4).random(W.shape[0]) * 30
+    E, U = problem.eigen(V)
+    hard = problem.loss(V)
+    gaps = []
+    for width in (10.0, 1.0, 0.1, 0.01):
+        problem.width = width
+        weights, slope = problem._soft_weights(E)
+        assert weights.sum() == pytest.approx(10, rel=1e-10)
+        assert np.all(slope <= 0)
+        gaps.append(abs(problem.loss(V) - hard))
+    assert all(later < earlier for earlier, later in zip(gaps, gaps[1:]))
+    assert gaps[-1] < 1e-6 * hard
 
 
 def test_the_papers_closed_form_has_the_opposite_sign():
@@ -91,9 +110,14 @@ def test_reduced_gradient_converges_to_the_full_one():
 
 def test_one_dimensional_toy_drops_the_error_tenfold():
     W, A, x = interval_operators(200)
-    result = optimize_potential(None, x, 15, operators=(W, A), mass_weighted=False, max_iterations=200)
+    plain = {"max_iterations": 200, "rounds": 1, "smoothing": ()}  # a simple spectrum: nothing to smooth
+    result = optimize_potential(None, x, 15, operators=(W, A), mass_weighted=False, **plain)
     assert result.loss <= 0.1 * result.lbo_loss
     assert result.history[-1]["loss"] < result.history[0]["loss"]
+    # the smoothed default keeps a stage only if the paper's loss fell: never worse than the LBO
+    default = optimize_potential(None, x, 15, operators=(W, A), mass_weighted=False)
+    assert default.loss < default.lbo_loss
+    assert {entry["width"] for entry in default.history} >= {0.0}
 
 
 def test_bad_requests():
@@ -108,6 +132,10 @@ def test_bad_requests():
         optimize_potential(shapes.icosphere(1), x, 5, operators=(W, A))
     with pytest.raises(HamsaError, match="one size"):
         optimize_potential(None, x, 5, operators=(W, A[:-1, :-1]))
+    with pytest.raises(HamsaError, match="smoothing widths"):
+        optimize_potential(None, x, 5, operators=(W, A), smoothing=(1.0, -2.0))
+    with pytest.raises(HamsaError, match="rounds"):
+        optimize_potential(None, x, 5, operators=(W, A), rounds=0)
 
 
 def test_a_pair_is_vertices_and_faces_as_everywhere():
@@ -144,16 +172,17 @@ def test_centring_removes_the_weighted_mean_and_makes_the_result_translation_inv
     assert raw[0].mean is None and np.abs(raw[1].potential - raw[0].potential).max() > 0.1 * scale  # it matters
 
 
-@pytest.mark.parametrize("center", [False, True])
-def test_cli_optimize_writes_the_python_apis_potential(tmp_path, capsys, center):
+@pytest.mark.parametrize("center, plain", [(False, False), (True, False), (False, True)])
+def test_cli_optimize_writes_the_python_apis_potential(tmp_path, capsys, center, plain):
     from hamsa.cli import main
 
     mesh = shapes.capsule(0.5, 2.0, 16)
     hamsa.save_mesh(mesh, tmp_path / "capsule.off")
     out = tmp_path / "V.npy"
     command = ["optimize", str(tmp_path / "capsule.off"), "-k", "8", "-m", "40", "--iterations", "15", "-o", str(out)]
-    assert main(command + (["--center"] if center else [])) == 0
+    assert main(command + (["--center"] if center else []) + (["--plain"] if plain else [])) == 0
     assert ("of the centred data" in capsys.readouterr().out) == center
     loaded = hamsa.load_mesh(tmp_path / "capsule.off")
-    expected = optimize_potential(loaded, loaded.vertices, 8, m=40, max_iterations=15, center=center)
+    optimizer = {"smoothing": (), "rounds": 1} if plain else {}
+    expected = optimize_potential(loaded, loaded.vertices, 8, m=40, max_iterations=15, center=center, **optimizer)
     np.testing.assert_allclose(np.load(out), expected.potential, rtol=1e-10, atol=1e-12)

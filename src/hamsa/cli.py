@@ -186,7 +186,14 @@ def _parser() -> argparse.ArgumentParser:
     optimize.add_argument(
         "-m", type=_positive_int, help="LBO eigenvectors of the reduced problem (default max(4k, k+100))"
     )
-    optimize.add_argument("--iterations", type=_positive_int, default=100, help="L-BFGS iterations (default 100)")
+    optimize.add_argument(
+        "--iterations", type=_positive_int, help="L-BFGS iterations in all (default 150; 200 with --plain)"
+    )
+    optimize.add_argument(
+        "--plain",
+        action="store_true",
+        help="the paper's plain L-BFGS: no smoothed stages, one round (faster; stalls where eigenvalues cross)",
+    )
     optimize.add_argument("--square", action="store_true", help="optimize V = v^2 >= 0 instead of a signed V")
     optimize.add_argument(
         "--center",
@@ -581,15 +588,18 @@ def _optimize(args) -> None:
     else:
         data = mesh.vertices
     start = time.perf_counter()
+    optimizer = {"smoothing": (), "rounds": 1, "max_iterations": 200} if args.plain else {}
+    if args.iterations is not None:
+        optimizer["max_iterations"] = args.iterations
     result = optimize_potential(
         mesh,
         data,
         args.k,
         m=args.m,
         parametrization="square" if args.square else "signed",
-        max_iterations=args.iterations,
         progress=sys.stderr.isatty() and not args.quiet,
         center=args.center,
+        **optimizer,
     )
     with atomic_write(output) as handle:
         np.save(handle, result.potential)

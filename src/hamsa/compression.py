@@ -154,6 +154,7 @@ def encode(
                 m=min(n, 2 * k + 50),
                 max_iterations=optimize_iterations,
                 rounds=max(1, optimize_iterations // 10),
+                smoothing=(),  # the optimizer the compression results were measured with
             ).potential
         potential = np.asarray(potential, dtype=np.float64)
         if potential.shape != (n,):

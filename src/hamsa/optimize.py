@@ -22,6 +22,19 @@ the first m LBO eigenvectors Phi_m (k < m << n): ``H_m = Lambda_m + Phi_m^T A di
 reduced problem, exactly (a Rayleigh-Ritz projection of H). One iteration costs O(n m^2) with no
 sparse solve; m = n reproduces the full problem. The truncation error of the gradient shrinks as m
 grows (``tests/test_optimize.py`` measures it).
+
+Smoothing. L jumps wherever E_k and E_{k+1} cross (the projector onto the first k eigenvectors changes
+which vectors it holds), and near such a crossing the gradient's ``1 / (E_b - E_a)`` is huge: L-BFGS stalls
+there, in whichever local minimum the rounding led it to. ``optimize_potential`` therefore first minimizes
+a smoothed loss, the soft top-k
+
+    L_w(V) = ||X||_A^2 - sum_b s_w(E_b) || psi_b^T A X ||^2,   s_w(E) = 1 / (1 + exp((E - mu) / w)),
+
+with mu chosen so that sum_b s_w(E_b) = k (the weights stay a budget of k vectors however the spectrum
+clusters), for decreasing widths w, and ends on the paper's loss itself (w = 0). Its gradient is the
+Daleckii-Krein formula: ``dL_w/dV_j = -a_j sum_ab psi_a(j) psi_b(j) (c_a . c_b) D_ab - (dL_w/dmu)(dmu/dV_j)``
+with ``c_b = psi_b^T A X``, ``D_ab = (s_a - s_b) / (E_a - E_b)`` (``s'(E_a)`` on the diagonal), bounded
+through every crossing; for w -> 0 it becomes the hard gradient above.
 """
 
 from __future__ import annotations
@@ -52,7 +65,8 @@ class OptimizationResult:
     loss : float, the representation loss with V (full operator, not the reduced one)
     lbo_loss : float, the same loss with V = 0 (the Laplace-Beltrami basis)
     basis : Eigenbasis of the optimized Hamiltonian (k eigenpairs), or None for raw operators
-    history : list of dicts (iteration, loss, gradient_norm, seconds), for the reduced problem
+    history : list of dicts (iteration, loss, gradient_norm, width, seconds) for the reduced problem;
+        ``loss`` is that of the stage's smoothing width (0: the paper's loss)
     mean : (d,) or scalar column means removed from X first (``center=True``), else None; both losses
         are then those of ``X - mean``, and X is represented as ``mean + Psi Psi^T A (X - mean)``
     """
@@ -82,9 +96,11 @@ class ReducedRepresentationProblem:
     X : (n,) or (n, d) data
     k : number of eigenvectors representing X
     epsilon : stabilization of 1/(E_b - E_a), relative to the largest |E|
+    width : 0 for the paper's loss; > 0 for the soft top-k loss of that width (eigenvalue units, module
+        docstring), which ``loss`` and ``loss_and_gradient`` then return
     """
 
-    def __init__(self, lbo_values, lbo_vectors, mass, X, k: int, epsilon: float = 1e-8):
+    def __init__(self, lbo_values, lbo_vectors, mass, X, k: int, epsilon: float = 1e-8, width: float = 0.0):
         values = np.asarray(lbo_values, dtype=np.float64)
         self.stiffness = np.diag(values) if values.ndim == 1 else (values + values.T) / 2
         self.phi = np.asarray(lbo_vectors, dtype=np.float64)
@@ -98,6 +114,7 @@ class ReducedRepresentationProblem:
             raise HamsaError(f"k = {k} must be between 1 and m - 1 = {m - 1} (m = number of LBO eigenvectors)")
         self.k = k
         self.epsilon = epsilon
+        self.width = float(width)
         self.total = float(np.sum(self.mass[:, None] * self.X**2))  # ||X||_A^2
         self.coefficients = self.phi.T @ (self.mass[:, None] * self.X)  # (m, d) = Phi^T A X
 
@@ -111,15 +128,16 @@ class ReducedRepresentationProblem:
         return np.linalg.eigh(self.reduced_operator(V))  # divide and conquer: faster than MRRR here
 
     def loss(self, V: np.ndarray) -> float:
-        _, U = self.eigen(V)
-        return self._loss(U)
-
-    def _loss(self, U: np.ndarray) -> float:
-        projected = U[:, : self.k].T @ self.coefficients
-        return self.total - float(np.sum(projected**2))
+        E, U = self.eigen(V)
+        strength = (U.T @ self.coefficients) ** 2
+        if self.width > 0:
+            return self.total - float(self._soft_weights(E)[0] @ strength.sum(axis=1))
+        return self.total - float(np.sum(strength[: self.k]))
 
     def loss_and_gradient(self, V: np.ndarray) -> tuple[float, np.ndarray]:
         E, U = self.eigen(V)
+        if self.width > 0:
+            return self._soft_loss_and_gradient(E, U)
         k = self.k
         c = U.T @ self.coefficients  # (m, d): Psi^T A X in the eigenbasis
         G = c[k:] @ c[:k].T  # (m-k, k): G_ab, a > k, b <= k
@@ -132,6 +150,33 @@ class ReducedRepresentationProblem:
         right = self.phi @ U[:, :k]
         gradient = -2.0 * self.mass * np.einsum("jb,jb->j", left, right)
         return self.total - float(np.sum(c[:k] ** 2)), gradient
+
+    def _soft_weights(self, E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s_w(E) (m,), s_w'(E) (m,)) with mu such that the weights sum to k."""
+        w, k = self.width, self.k
+
+        def weights(mu):
+            return 0.5 * (1.0 - np.tanh((E - mu) / (2 * w)))  # the logistic 1 / (1 + exp((E - mu) / w))
+
+        mu = sopt.brentq(lambda mu: weights(mu).sum() - k, E[0] - 60 * w, E[-1] + 60 * w, xtol=1e-12 * w)
+        s = weights(mu)
+        return s, -s * (1.0 - s) / w
+
+    def _soft_loss_and_gradient(self, E: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray]:
+        s, slope = self._soft_weights(E)
+        c = U.T @ self.coefficients
+        strength = np.sum(c**2, axis=1)
+        difference = E[:, None] - E[None, :]
+        close = np.abs(difference) < 1e-8 * self.width
+        D = np.where(
+            close, (slope[:, None] + slope[None, :]) / 2, (s[:, None] - s[None, :]) / np.where(close, 1.0, difference)
+        )
+        psi = self.phi @ U  # (n, m): O(n m^2), the order of reduced_operator
+        at_fixed_mu = self.mass * np.einsum("ja,ja->j", psi @ ((c @ c.T) * D), psi)
+        # mu keeps sum_b s_b = k: dmu = sum_b s'_b dE_b / sum_b s'_b, dE_b/dV_j = a_j psi_b(j)^2
+        dmu = self.mass * ((psi**2) @ slope) / slope.sum()
+        gradient = -(at_fixed_mu - float(slope @ strength) * dmu)
+        return self.total - float(s @ strength), gradient
 
 
 def representation_loss(basis_vectors: np.ndarray, mass: np.ndarray, X: np.ndarray) -> float:
@@ -207,13 +252,20 @@ def optimize_potential(
     m: int | None = None,
     parametrization: str = "signed",
     mass_weighted: bool = True,
-    max_iterations: int = 200,
-    rounds: int = 1,
+    max_iterations: int = 150,
+    rounds: int = 3,
+    smoothing: tuple[float, ...] = (3.0, 1.0),
     epsilon: float = 1e-8,
     progress: bool = False,
     center: bool = False,
 ) -> OptimizationResult:
     """The potential V minimizing ``||Psi_k Psi_k^T A X - X||_A^2`` (paper section 3), by L-BFGS from V = 0.
+
+    The minimization runs in stages: the soft top-k loss for each width in ``smoothing`` (module
+    docstring), then the paper's loss, starting each stage where the last ended. The smoothed stages carry
+    L-BFGS past the eigenvalue crossings where it otherwise stalls; the result is always judged by the
+    paper's loss. ``smoothing=(), rounds=1, max_iterations=200`` is the plain L-BFGS of hamsa <= 0.5.0
+    (docs/results/optimize.md compares both).
 
     Parameters
     ----------
@@ -226,18 +278,20 @@ def optimize_potential(
         m >= n - 1 on small problems uses them all (the exact, full problem)
     parametrization : "signed" (V free, the paper's default "for performance") or "square" (V = v^2 >= 0)
     mass_weighted : the geometric (A-weighted) setting; False is the Euclidean one (A = I)
-    max_iterations : L-BFGS iterations in all
-    rounds : the reduced subspace is recomputed around the current V this many times (each costs one
-        sparse eigensolve of m eigenpairs); a round's step is kept only if the loss decreased. One round
-        suffices when V stays moderate (the hand); large potentials (e.g. on a combinatorial Laplacian)
-        leave the LBO subspace and need several
+    max_iterations : L-BFGS iterations in all, shared equally by the rounds of every stage
+    rounds : per stage, the reduced subspace is recomputed around the current V this many times (each
+        costs one sparse eigensolve of m eigenpairs); a round's step is kept only if the stage's loss
+        decreased there, and a stage ends at its first round without progress. Large potentials (e.g. on
+        a combinatorial Laplacian) leave the LBO subspace and need several
+    smoothing : widths of the smoothed stages, in units of the mean eigenvalue spacing around E_k at the
+        start, largest first; () minimizes the paper's loss only
     epsilon : stabilization of the eigenvalue differences (relative)
     progress : show a progress bar (tqdm when installed) on stderr
     center : first subtract each column's mean (mass-weighted in the geometric setting), kept in
         ``result.mean``. A Hamiltonian basis has no constant function, so raw coordinates make it spend
         eigenvectors on their translation; with ``center`` the result does not depend on where the shape
-        sits. Whether the centred optimum represents X better depends on the shape (both ways at the
-        defaults, docs/results/optimize.md): off by default, as in the paper
+        sits. With the default optimizer raw and centred coordinates end close to each other
+        (docs/results/optimize.md): off by default, as in the paper
 
     Returns
     -------
@@ -247,10 +301,16 @@ def optimize_potential(
     ------
     HamsaError
         On a bad mesh or operators, X with the wrong number of rows or non-finite entries, k >= m, an
-        unknown parametrization, or a non-lumped mass.
+        unknown parametrization, a non-lumped mass, rounds or max_iterations below 1, or a smoothing
+        width that is not a finite positive number.
     """
     if parametrization not in PARAMETRIZATIONS:
         raise HamsaError(f"parametrization must be one of {PARAMETRIZATIONS}, got {parametrization!r}")
+    smoothing = tuple(float(width) for width in smoothing)
+    if not all(np.isfinite(width) and width > 0 for width in smoothing):
+        raise HamsaError(f"smoothing widths must be finite and positive, got {smoothing}")
+    if rounds < 1 or max_iterations < 1:
+        raise HamsaError(f"rounds and max_iterations must be at least 1, got {rounds} and {max_iterations}")
     W, A, a = _operators(mesh, operators, mass_weighted)
     n = W.shape[0]
     X = np.asarray(X, dtype=np.float64)
@@ -272,7 +332,7 @@ def optimize_potential(
         return ReducedRepresentationProblem(vectors.T @ (W @ vectors), vectors, a, X, k, epsilon)
 
     square = parametrization == "square"
-    x, history, lbo_loss = _minimize(subspace, n, square, max_iterations, rounds, progress)
+    x, history, lbo_loss = _minimize(subspace, n, square, max_iterations, rounds, smoothing, progress)
     V = x**2 if square else x
     if lbo_loss is None:
         lbo_loss = subspace(np.zeros(n)).loss(np.zeros(n))
@@ -281,9 +341,11 @@ def optimize_potential(
     return OptimizationResult(V, representation_loss(vectors, a, X), lbo_loss, basis, history, mean)
 
 
-def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, progress: bool):
-    """L-BFGS on the reduced problems ``subspace(V)``, re-centred ``rounds`` times, from V = 0 (or v = 1e-3
-    when ``square``: V = v^2). Returns (x, history, the loss at V = 0 or None when ``square``)."""
+def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, smoothing, progress: bool):
+    """L-BFGS on the reduced problems ``subspace(V)`` from V = 0 (or v = 1e-3 when ``square``: V = v^2):
+    one stage per smoothing width (in mean eigenvalue spacings at the k-th eigenvalue of the start), then
+    the paper's loss, each stage re-centred ``rounds`` times. Returns (x, history, the loss at V = 0 or
+    None when ``square``)."""
     history: list[dict] = []
     bar = _Progress(max_iterations, progress)
     start = time.perf_counter()
@@ -302,41 +364,59 @@ def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, 
         loss, gradient = (last["loss"], last["gradient"]) if np.array_equal(last.get("x"), x) else objective(x)
         history.append(
             {"iteration": len(history), "loss": loss, "gradient_norm": float(np.linalg.norm(gradient)),
-             "seconds": time.perf_counter() - start}
+             "width": problem.width, "seconds": time.perf_counter() - start}
         )  # fmt: skip
         bar.update(len(history), loss, history[-1]["gradient_norm"])
 
     x = np.full(n, 1e-3) if square else np.zeros(n)
     problem = subspace(to_V(x))
     lbo_loss = None if square else problem.loss(np.zeros(n))
-    current = problem.loss(to_V(x))
     history.append(
-        {"iteration": 0, "loss": current, "gradient_norm": float(np.linalg.norm(objective(x)[1])), "seconds": 0.0}
-    )
-    per_round = max(1, max_iterations // rounds)
+        {"iteration": 0, "loss": problem.loss(to_V(x)), "gradient_norm": float(np.linalg.norm(objective(x)[1])),
+         "width": 0.0, "seconds": 0.0}
+    )  # fmt: skip
+    widths = [factor * _spacing_at_k(problem, to_V(x)) for factor in smoothing] + [0.0]
+    per_round = max(1, max_iterations // (rounds * len(widths)))
     try:
-        for _ in range(rounds):
-            result = sopt.minimize(
-                objective,
-                x,
-                jac=True,
-                method="L-BFGS-B",
-                callback=record,
-                options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20},
-            )
-            # Trust the reduced model only where it is accurate: re-center the subspace at the new V and
-            # accept the step only if the loss there (the true one, up to the loose basis) decreased;
-            # otherwise halve the step, up to four times.
-            step = result.x - x
-            for _ in range(5):
-                candidate = subspace(to_V(x + step))
-                value = candidate.loss(to_V(x + step))
-                if value < current:
-                    x, problem, current = x + step, candidate, value
+        for width in widths:
+            before = (x, problem, problem.loss(to_V(x)))  # the paper's loss: problem.width is 0 here
+            problem.width = width
+            current = problem.loss(to_V(x))
+            for _ in range(rounds):
+                result = sopt.minimize(
+                    objective,
+                    x,
+                    jac=True,
+                    method="L-BFGS-B",
+                    callback=record,
+                    options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20},
+                )
+                # Trust the reduced model only where it is accurate: re-center the subspace at the new V and
+                # accept the step only if this stage's loss there (the true one, up to the loose basis)
+                # decreased; otherwise halve the step, up to four times, and else end the stage.
+                step = result.x - x
+                for _ in range(5):
+                    candidate = subspace(to_V(x + step))
+                    candidate.width = width
+                    value = candidate.loss(to_V(x + step))
+                    if value < current:
+                        x, problem, current = x + step, candidate, value
+                        break
+                    step = step / 2
+                else:
                     break
-                step = step / 2
-            else:
-                break
+            problem.width = 0.0
+            if problem.loss(to_V(x)) >= before[2]:  # a smoothed stage is kept only if the paper's loss fell
+                x, problem, _ = before
+                problem.width = 0.0
     finally:
         bar.close()
     return x, history, lbo_loss
+
+
+def _spacing_at_k(problem: ReducedRepresentationProblem, V: np.ndarray) -> float:
+    """Mean gap of the reduced eigenvalues from the (k - 5)-th to the (k + 5)-th: the smoothing unit."""
+    E = problem.eigen(V)[0]
+    low, high = max(0, problem.k - 6), min(len(E) - 1, problem.k + 4)
+    spacing = (E[high] - E[low]) / (high - low)
+    return float(spacing) if spacing > 0 else 1e-3 * max(float(np.abs(E).max()), 1.0)

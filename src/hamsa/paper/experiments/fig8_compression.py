@@ -49,6 +49,7 @@ def run(args) -> CompressionResult:
             mass_weighted=False,
             max_iterations=60,
             rounds=6,
+            smoothing=(),  # as compression.encode
         )
         for method in METHODS:
             data = compression.encode(mesh, count, bits, method, potential=optimized.potential)
