@@ -610,7 +610,8 @@ def _optimize(args) -> None:
     )
     print(
         f"potential in [{result.potential.min():.4g}, {result.potential.max():.4g}], "
-        f"{len(result.history) - 1} iterations, {time.perf_counter() - start:.1f} s"
+        f"{len(result.history) - 1} iterations ({'plain' if args.plain else 'smoothed, then plain'}), "
+        f"{time.perf_counter() - start:.1f} s"
     )
     print(f"wrote           {output}")
 
