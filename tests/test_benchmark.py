@@ -204,7 +204,7 @@ def test_landmark_scale_scales_only_the_landmark_hamiltonian(pose_dataset):
         evaluate_pair(source, target, identity, landmark_scale=0.0, **options)
 
 
-def test_the_commutativity_weight_reaches_the_fmap_start_and_is_named_in_the_table(pose_dataset, tmp_path):
+def test_the_start_map_weights_reach_the_fmap_start_and_are_named_in_the_table(pose_dataset, tmp_path):
     from hamsa.paper.benchmark import load_pair
 
     dataset = load_folder(pose_dataset)
@@ -219,7 +219,19 @@ def test_the_commutativity_weight_reaches_the_fmap_start_and_is_named_in_the_tab
         for key in ("auc", "mean_error", "within_0.05"):
             assert row[key] == pytest.approx(reference[key], rel=1e-12)
     hks = benchmark_dataset(dataset, tmp_path / "hks", methods=("hks",), k=30, points=200, limit=1, progress=False)
-    assert "commutativity_weight" not in hks  # no functional-map start, no weight
-    with pytest.raises(HamsaError, match="commutativity weight must be finite"):  # before any pair runs
-        benchmark_dataset(dataset, tmp_path / "bad", methods=("fmap",), commutativity_weight=-1.0)
-    assert not (tmp_path / "bad").exists()
+    assert "commutativity_weight" not in hks and "orientation_weight" not in hks  # no functional-map start
+    assert "orientation_weight" not in table  # the default, 0, is no term
+    oriented = benchmark_dataset(dataset, tmp_path / "oriented", methods=("fmap",), k=30, points=200, limit=1,
+                                 progress=False, commutativity_weight=0.0, orientation_weight=0.1)  # fmt: skip
+    assert oriented["orientation_weight"] == 0.1
+    assert "Orientation-preserving weight of that start: 0.1." in (tmp_path / "oriented" / "table.md").read_text()
+    expected = evaluate_pair(*load_pair(dataset, "humanoid0", "humanoid1"), k=30, methods=("fmap",), points=200,
+                             commutativity_weight=0.0, orientation_weight=0.1)["rows"]  # fmt: skip
+    assert [row["auc"] for row in oriented["rows"]] == pytest.approx([row["auc"] for row in expected], rel=1e-12)
+    for weights, name in (
+        ({"commutativity_weight": -1.0}, "commutativity"),
+        ({"orientation_weight": -1.0}, "orientation"),
+    ):
+        with pytest.raises(HamsaError, match=f"{name} weight must be finite"):  # before any pair runs
+            benchmark_dataset(dataset, tmp_path / "bad", methods=("fmap",), **weights)
+        assert not (tmp_path / "bad").exists()

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
 from hamsa.eigen import Eigenbasis
@@ -10,6 +13,7 @@ from hamsa.matching.functional import functional_map, icp_refine, zoomout
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
+from hamsa.mesh import as_trimesh
 from hamsa.pointcloud import PointCloud
 
 METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
@@ -17,6 +21,30 @@ METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
 START_K = 20
 # and with this descriptor-commutativity weight (chosen on half of the SCAPE pairs, docs/results/matching.md)
 COMMUTATIVITY_WEIGHT = 0.03
+
+
+@dataclass(frozen=True)
+class _Request:
+    """What every matcher receives: the two bases and the options of :func:`match`."""
+
+    source: Eigenbasis
+    target: Eigenbasis
+    landmarks: tuple | None
+    meshes: tuple | None
+    progress: Callable | None
+    commutativity_weight: float
+    orientation_weight: float
+
+    def start_map(self, landmarks=None) -> tuple[np.ndarray, np.ndarray]:
+        """The (START_K, START_K) start of fmap and sgfe, with this request's terms."""
+        return hks_functional_map(
+            self.source,
+            self.target,
+            landmarks=landmarks,
+            commutativity_weight=self.commutativity_weight,
+            orientation_weight=self.orientation_weight,
+            meshes=self.meshes,
+        )
 
 
 def match(
@@ -28,6 +56,7 @@ def match(
     meshes=None,
     progress=None,
     commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+    orientation_weight: float = 0.0,
 ) -> np.ndarray:
     """``map_source_to_target`` (n_s,): for each source vertex, a target vertex, by one of :data:`METHODS`.
 
@@ -46,47 +75,67 @@ def match(
     source, target : the two shapes' eigenbases (the LBO's or Hamiltonians'), with the same k for the
         spectral methods; use shapes scaled alike (e.g. :meth:`hamsa.TriMesh.scaled_to_unit_area`)
     landmarks : (source ids, target ids) of known pairs, for ``icskm`` and ``icskm_geo``; optional for ``fmap``
-    meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``. Every other
-        method needs only the eigenbases, so it runs on point clouds' bases as on meshes'.
+    meshes : (source, target) meshes for ``sgfe``; meshes or point clouds for ``icskm_geo``; for ``fmap``,
+        optional, for the orientation term. Every other method needs only the eigenbases, so it runs on
+        point clouds' bases as on meshes'.
     progress : optional ``progress(done, total)`` of the long steps: ZoomOut's sizes (``fmap``), SGFE's ICP
         iterations (``sgfe``), ICSKM's ICP runs (``icskm``, ``icskm_geo``); the descriptor methods do not
         call it
     commutativity_weight : the descriptor-commutativity weight of the functional map that starts ``fmap``
         and ``sgfe`` (:func:`~hamsa.matching.functional_map`; 0: the row-wise fit); the other methods ignore it
+    orientation_weight : the weight of the orientation-preserving term of that functional map, which tells
+        a map from its mirror image (a left-right symmetric shape's HKS cannot); > 0 needs ``meshes`` that
+        are consistently oriented triangle meshes (a point cloud has no orientation). Surfaces whose normals
+        point opposite ways (signed volumes of opposite signs) are matched orientation-reversing, i.e. as the
+        same surface. Default 0: the term decides a mirror-symmetric pair (the built-in humanoid and its
+        mirror image) but at 0.03 it lowered the SCAPE scores (docs/results/matching.md).
 
     Raises
     ------
     HamsaError
-        On an unknown method or a missing ``landmarks`` / ``meshes``.
+        On an unknown method, a missing ``landmarks`` / ``meshes``, a negative or non-finite weight, or an
+        orientation weight > 0 without two consistently oriented triangle meshes.
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
-    check_commutativity_weight(commutativity_weight)
-    return _MATCHERS[method](source, target, landmarks, meshes, progress, commutativity_weight)
+    check_term_weight("commutativity", commutativity_weight)
+    check_term_weight("orientation", orientation_weight)
+    problem = _orientation_problem(meshes) if orientation_weight else None
+    if problem:
+        raise HamsaError(f"the orientation term needs {problem}; pass orientation_weight=0 to go without it")
+    request = _Request(source, target, landmarks, meshes, progress, commutativity_weight, orientation_weight)
+    return _MATCHERS[method](request)
 
 
-def check_commutativity_weight(weight: float) -> None:
-    """Raise a HamsaError unless ``weight`` is a finite number >= 0 (the start map's commutativity weight)."""
-    if not (np.isfinite(weight) and weight >= 0):
-        raise HamsaError(f"the commutativity weight must be finite and >= 0, got {weight}")
+def check_term_weight(term: str, weight) -> None:
+    """Raise a HamsaError unless ``weight`` is a finite number >= 0 (a weight of the start map's ``term``)."""
+    if not (isinstance(weight, (int, float, np.number)) and np.isfinite(weight) and weight >= 0):
+        raise HamsaError(f"the {term} weight must be finite and >= 0, got {weight}")
 
 
-def _hks(source, target, landmarks, meshes, progress, commutativity_weight):
+def _orientation_problem(meshes) -> str | None:
+    """Why ``meshes`` cannot carry the orientation term (a phrase), or None when they can."""
+    if meshes is None:
+        return "the two meshes (meshes=(source, target))"
+    if any(isinstance(shape, PointCloud) for shape in meshes):
+        return "triangle meshes (a point cloud has no orientation)"
+    if not all(as_trimesh(shape).is_consistently_oriented for shape in meshes):
+        return "consistently oriented meshes (repair fixes the orientation)"
+    return None
+
+
+def _hks(request):
     from hamsa.diffusion import default_hks_times, heat_kernel_signature
 
-    times = default_hks_times(source, 50)
-    return match_descriptors(
-        heat_kernel_signature(source, times, scaled=True), heat_kernel_signature(target, times, scaled=True)
-    )
+    times = default_hks_times(request.source, 50)
+    return match_descriptors(*(heat_kernel_signature(b, times, scaled=True) for b in (request.source, request.target)))
 
 
-def _wks(source, target, landmarks, meshes, progress, commutativity_weight):
+def _wks(request):
     from hamsa.diffusion import default_wks_energies, wave_kernel_signature
 
-    energies, sigma = default_wks_energies(source, 50)
-    return match_descriptors(
-        wave_kernel_signature(source, energies, sigma), wave_kernel_signature(target, energies, sigma)
-    )
+    energies, sigma = default_wks_energies(request.source, 50)
+    return match_descriptors(*(wave_kernel_signature(b, energies, sigma) for b in (request.source, request.target)))
 
 
 def hks_functional_map(
@@ -95,11 +144,15 @@ def hks_functional_map(
     k: int = START_K,
     landmarks=None,
     commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+    orientation_weight: float = 0.0,
+    meshes=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
     ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``. With ``landmarks`` (source ids,
     target ids), their heat kernel maps (:func:`hamsa.diffusion.landmark_descriptors`) join the HKS;
-    ``commutativity_weight``: that of :func:`functional_map` (0: the row-wise fit)."""
+    ``commutativity_weight``, ``orientation_weight``: those of :func:`functional_map` (both 0: the row-wise
+    fit); the orientation term needs ``meshes``, and is orientation-preserving with respect to each
+    surface's outward normals (the sign of its signed volume)."""
     from hamsa.diffusion import default_hks_times, heat_kernel_signature, landmark_descriptors
 
     small = source.truncate(k), target.truncate(k)
@@ -111,42 +164,58 @@ def hks_functional_map(
             np.hstack([d, landmark_descriptors(basis, ids, kernel_times)])
             for d, basis, ids in zip(descriptors, (source, target), landmarks)
         ]
-    return icp_refine(functional_map(*small, *descriptors, commutativity_weight=commutativity_weight), *small)
+    orientation = "preserving"
+    if orientation_weight and meshes is not None:
+        outward = [np.sign(as_trimesh(shape).signed_volume) or 1.0 for shape in meshes]
+        orientation = "preserving" if outward[0] == outward[1] else "reversing"
+    C = functional_map(
+        *small,
+        *descriptors,
+        commutativity_weight=commutativity_weight,
+        orientation_weight=orientation_weight,
+        meshes=meshes,
+        orientation=orientation,
+    )
+    return icp_refine(C, *small)
 
 
-def _fmap(source, target, landmarks, meshes, progress, commutativity_weight):
-    _, initial = hks_functional_map(source, target, landmarks=landmarks, commutativity_weight=commutativity_weight)
-    return zoomout(initial, source, target, range(START_K, min(source.k, target.k) + 1, 4), progress)[1]
+def _fmap(request):
+    _, initial = request.start_map(request.landmarks)
+    sizes = range(START_K, min(request.source.k, request.target.k) + 1, 4)
+    return zoomout(initial, request.source, request.target, sizes, request.progress)[1]
 
 
-def _sgfe(source, target, landmarks, meshes, progress, commutativity_weight):
-    if meshes is None:
+def _sgfe(request):
+    if request.meshes is None:
         raise HamsaError("sgfe needs the two meshes (for the eigenfunction gradients)")
-    if any(isinstance(shape, PointCloud) for shape in meshes):
+    if any(isinstance(shape, PointCloud) for shape in request.meshes):
         raise HamsaError("sgfe needs triangle meshes (its gradients are per face), not point clouds: use fmap")
-    C, _ = hks_functional_map(source, target, commutativity_weight=commutativity_weight)
-    start = np.eye(source.k)
+    C, _ = request.start_map()
+    start = np.eye(request.source.k)
     start[:START_K, :START_K] = C
-    return match_sgfe(*meshes, source, target, start, progress=progress)[1]
+    return match_sgfe(*request.meshes, request.source, request.target, start, progress=request.progress)[1]
 
 
-def _icskm(source, target, landmarks, meshes, progress, commutativity_weight, features=None):
-    if landmarks is None:
+def _icskm(request, features=None):
+    if request.landmarks is None:
         raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
-    return match_icskm(source, target, *landmarks, features=features, progress=progress)[1]
+    return match_icskm(
+        request.source, request.target, *request.landmarks, features=features, progress=request.progress
+    )[1]
 
 
-def _icskm_geo(source, target, landmarks, meshes, progress, commutativity_weight):
+def _icskm_geo(request):
     from hamsa.geodesic import geodesic_solver
 
-    if landmarks is None:
+    if request.landmarks is None:
         raise HamsaError("icskm_geo needs landmark pairs (source ids, target ids)")
-    if meshes is None:
+    if request.meshes is None:
         raise HamsaError("icskm_geo needs the two shapes (for the geodesic distances from the landmarks)")
     features = tuple(
-        geodesic_solver(shape).distances_from(ids, unreachable="farthest") for shape, ids in zip(meshes, landmarks)
+        geodesic_solver(shape).distances_from(ids, unreachable="farthest")
+        for shape, ids in zip(request.meshes, request.landmarks)
     )
-    return _icskm(source, target, landmarks, meshes, progress, commutativity_weight, features)
+    return _icskm(request, features)
 
 
 _MATCHERS = {"hks": _hks, "wks": _wks, "fmap": _fmap, "sgfe": _sgfe, "icskm": _icskm, "icskm_geo": _icskm_geo}

@@ -49,7 +49,7 @@ from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summ
 from hamsa.files import atomic_write
 from hamsa.geodesic import GEODESIC_METHODS, geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
-from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT, check_commutativity_weight
+from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT, check_term_weight
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
@@ -64,14 +64,28 @@ SCORES = ("auc", "mean_error", "within_0.05")
 
 
 def match_pair(
-    method: str, source, target, landmarks=None, meshes=None, commutativity_weight: float = COMMUTATIVITY_WEIGHT
+    method: str,
+    source,
+    target,
+    landmarks=None,
+    meshes=None,
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+    orientation_weight: float = 0.0,
 ) -> np.ndarray:
     """``map_source_to_target`` by one of :data:`METHODS` (:func:`hamsa.matching.match`; ``texture`` is HKS
     matching, its difference being the potential of its Hamiltonian basis)."""
     if method not in METHODS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
     method = "hks" if method == "texture" else method
-    return match(source, target, method, landmarks=landmarks, meshes=meshes, commutativity_weight=commutativity_weight)
+    return match(
+        source,
+        target,
+        method,
+        landmarks=landmarks,
+        meshes=meshes,
+        commutativity_weight=commutativity_weight,
+        orientation_weight=orientation_weight,
+    )
 
 
 def paired_bases(
@@ -126,6 +140,7 @@ def evaluate_pair(
     landmark_scale: float = 1.0,
     geodesics: str = "heat",
     commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+    orientation_weight: float = 0.0,
 ) -> dict:
     """Scores of every method x basis on one pair: {"rows": [...], "curves": {method: {basis: curve}}}.
 
@@ -141,8 +156,8 @@ def evaluate_pair(
     barely moves the basis and 10-100 starts to localize the low functions near the landmarks.
     ``geodesics``: the distances that score the maps, ``"heat"`` or ``"exact"``
     (:func:`hamsa.evaluation.geodesic_errors`); the landmark potentials always use the heat method.
-    ``commutativity_weight``: that of the functional map starting ``fmap`` and ``sgfe``
-    (:func:`hamsa.matching.match`)."""
+    ``commutativity_weight``, ``orientation_weight``: those of the functional map starting ``fmap`` and
+    ``sgfe`` (:func:`hamsa.matching.match`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
@@ -186,7 +201,7 @@ def evaluate_pair(
                     pair = hamiltonians[potential_of[method]]
                 else:
                     pair = bases[basis]
-                mapping = match_pair(method, *pair, pairs, (source, target), commutativity_weight)
+                mapping = match_pair(method, *pair, pairs, (source, target), commutativity_weight, orientation_weight)
                 pooled.append(distances.errors(mapping[chosen]))
             errors = np.concatenate(pooled)
             rows.append({"method": method, "basis": basis, **summary(errors)})
@@ -280,6 +295,7 @@ def _run_pair(dataset: Dataset, source_name: str, target_name: str, settings: di
         landmark_scale=settings.get("landmark_scale", 1.0),
         geodesics=settings.get("geodesics", "heat"),
         commutativity_weight=settings.get("commutativity_weight", COMMUTATIVITY_WEIGHT),
+        orientation_weight=settings.get("orientation_weight", 0.0),
     )
     record = {"source": source_name, "target": target_name, "settings_key": _settings_key(settings), **result}
     save_record(path, record)
@@ -322,6 +338,7 @@ def benchmark_dataset(
     landmark_scale: float = 1.0,
     geodesics: str = "heat",
     commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+    orientation_weight: float = 0.0,
 ) -> dict:
     """Run every evaluation pair (resumably, in parallel) and write the summary table; returns it.
 
@@ -345,14 +362,16 @@ def benchmark_dataset(
     oracle : build the potentials from the ground truth, as the paper does (:func:`evaluate_pair`); the
         table's ``potentials`` field says which
     geodesics : ``"heat"`` or ``"exact"`` distances for the scores (:func:`evaluate_pair`)
-    commutativity_weight : that of the functional map starting ``fmap`` and ``sgfe`` (:func:`evaluate_pair`)
+    commutativity_weight, orientation_weight : those of the functional map starting ``fmap`` and ``sgfe``
+        (:func:`evaluate_pair`)
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise HamsaError(f"unknown matching methods {sorted(unknown)}; known: {', '.join(METHODS)}")
     if geodesics not in GEODESIC_METHODS:  # (checked here, not once per pair in the workers)
         raise HamsaError(f"geodesics must be one of {GEODESIC_METHODS}, got {geodesics!r}")
-    check_commutativity_weight(commutativity_weight)  # (likewise)
+    check_term_weight("commutativity", commutativity_weight)  # (likewise)
+    check_term_weight("orientation", orientation_weight)
     output = Path(output)
     (output / "pairs").mkdir(parents=True, exist_ok=True)
     settings = {"k": int(k), "methods": list(methods), "points": int(points), "cache": str(output / "bases")}
@@ -370,6 +389,8 @@ def benchmark_dataset(
         settings["geodesics"] = str(geodesics)
     if {"fmap", "sgfe"} & set(methods):  # (always: results from before its default was 0.03 had none)
         settings["commutativity_weight"] = float(commutativity_weight)
+        if orientation_weight:  # (0, the default, stays out of the key: earlier results remain valid)
+            settings["orientation_weight"] = float(orientation_weight)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
@@ -384,8 +405,9 @@ def benchmark_dataset(
     table = summarize(records, dataset.name, dataset.classes)
     table["potentials"] = "oracle (from the ground truth)" if oracle else "estimated (no ground truth)"
     table["geodesics"] = "exact (MMP)" if geodesics == "exact" else "heat method"
-    if "commutativity_weight" in settings:
-        table["commutativity_weight"] = settings["commutativity_weight"]
+    for name in ("commutativity_weight", "orientation_weight"):
+        if name in settings:
+            table[name] = settings[name]
     failed = [result for result in results if "error" in result]
     if failed:
         table["failed"] = sorted(failed, key=lambda result: (result["source"], result["target"]))
@@ -448,6 +470,7 @@ def table_markdown(table: dict) -> str:
         "potentials": "Hamiltonian potentials",
         "geodesics": "Geodesic errors",
         "commutativity_weight": "Descriptor-commutativity weight of the fmap / sgfe start",
+        "orientation_weight": "Orientation-preserving weight of that start",
     }
     lines = [f"{label}: {table[key]}." for key, label in notes.items() if key in table]
     lines += [""] if lines else []
