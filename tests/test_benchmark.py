@@ -2,6 +2,7 @@
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -235,3 +236,50 @@ def test_the_start_map_weights_reach_the_fmap_start_and_are_named_in_the_table(p
         with pytest.raises(HamsaError, match=f"{name} weight must be finite"):  # before any pair runs
             benchmark_dataset(dataset, tmp_path / "bad", methods=("fmap",), **weights)
         assert not (tmp_path / "bad").exists()
+
+
+def test_a_terminated_benchmark_stops_its_worker_processes(pose_dataset, tmp_path):
+    """SIGTERM to ``hamsa benchmark-matching --jobs 2`` (a ``kill``, a scheduler's time limit) ends the command
+    with 143 and takes its worker processes down with it, instead of leaving them computing."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    def descendants(pid):
+        found, todo = [], [pid]
+        while todo:
+            try:
+                children = Path(f"/proc/{todo.pop()}/task").glob("*/children")
+                ids = [int(c) for path in children for c in path.read_text().split()]
+            except OSError:
+                continue
+            found += ids
+            todo += ids
+        return found
+
+    if not Path("/proc/self/task").exists():
+        pytest.skip("needs /proc to list child processes")
+    command = [sys.executable, "-m", "hamsa", "benchmark-matching", str(pose_dataset), "--kind", "folder",
+               "-k", "60", "--jobs", "2", "-q", "-o", str(tmp_path / "out")]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while len(descendants(process.pid)) < 2 and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.2)  # until the workers run
+    workers = descendants(process.pid)
+    assert process.poll() is None and len(workers) >= 2, "the benchmark ended before it could be terminated"
+    time.sleep(1.0)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 143 and "terminated" in err
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{pid}").exists() and "Z" not in _process_state(pid) for pid in workers):
+        assert time.monotonic() < deadline, "worker processes still running after the benchmark was terminated"
+        time.sleep(0.2)
+
+
+def _process_state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return "Z"

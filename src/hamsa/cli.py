@@ -7,10 +7,13 @@ leaves a partial output file behind (outputs are written to a temporary file, th
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -1048,6 +1051,29 @@ def _config(args) -> None:
     show_config()
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised as an interrupt so that what runs stops as on Ctrl-C."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """While a command runs, SIGTERM (``kill``, a batch scheduler's time limit) raises :class:`_Terminated`:
+    the parallel benchmark then shuts its worker processes down as on Ctrl-C instead of leaving them computing,
+    and no output is left half-written (outputs are written to a temporary file, then renamed)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminated(signum, frame):
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code: 0, 2 for bad input (one line on stderr naming it), 3 when a
     solver did not converge, 130 on Ctrl-C, 1 for an operating-system error (e.g. disk full)."""
@@ -1069,7 +1095,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
         command = f"hamsa {args.command}"
-        handlers[args.command](args)
+        with _terminate_as_interrupt():
+            handlers[args.command](args)
+    except _Terminated:
+        print(f"{command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except ConvergenceError as exc:
         print(f"{command}: solver failed: {exc}", file=sys.stderr)
         return EXIT_SOLVER_FAILED
