@@ -102,7 +102,10 @@ def match(
     check_term_weight("orientation", orientation_weight)
     problem = _orientation_problem(meshes) if orientation_weight else None
     if problem:
-        raise HamsaError(f"the orientation term needs {problem}; pass orientation_weight=0 to go without it")
+        raise HamsaError(
+            f"the orientation term (orientation_weight, hamsa match --orientation) needs {problem}; "
+            "set it to 0 to go without it"
+        )
     request = _Request(source, target, landmarks, meshes, progress, commutativity_weight, orientation_weight)
     return _MATCHERS[method](request)
 
@@ -120,7 +123,7 @@ def _orientation_problem(meshes) -> str | None:
     if any(isinstance(shape, PointCloud) for shape in meshes):
         return "triangle meshes (a point cloud has no orientation)"
     if not all(as_trimesh(shape).is_consistently_oriented for shape in meshes):
-        return "consistently oriented meshes (repair fixes the orientation)"
+        return "consistently oriented meshes (hamsa.repair.repair_mesh or --repair fixes the orientation)"
     return None
 
 
