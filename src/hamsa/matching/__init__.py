@@ -20,6 +20,7 @@ from hamsa.matching.functional import (
     multiplication_operator,
     offdiagonal_energy,
     orientation_operator,
+    orientation_ratio,
     zoomout,
 )
 from hamsa.matching.icskm import match_icskm
@@ -49,6 +50,7 @@ __all__ = [
     "nearest_rows",
     "offdiagonal_energy",
     "orientation_operator",
+    "orientation_ratio",
     "resolve_signs",
     "resolve_signs_without_truth",
     "spectral_gradient_fields",

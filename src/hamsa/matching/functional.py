@@ -109,26 +109,71 @@ def orientation_operator(mesh, basis: Eigenbasis, f) -> np.ndarray:
     return operators[0] if f.ndim == 1 else operators
 
 
-def _operator_pairs(source, target, F, G, commutativity_weight, orientation_weight, meshes, orientation):
-    """[(weight, X_t, X_s)] of the terms ``weight ||C X_t - X_s C||^2`` beyond the Laplacian's."""
+def orientation_ratio(
+    C,
+    source: Eigenbasis,
+    target: Eigenbasis,
+    source_descriptors,
+    target_descriptors,
+    meshes,
+    orientation: str = "preserving",
+) -> float:
+    """How far a functional map C (k_s, k_t) is from having ``orientation`` rather than the opposite one:
+    ``sum ||C O_g -+ O_f C||^2 / sum ||C O_g +- O_f C||^2`` over the descriptor pairs (f, g) (the
+    orientation term of :func:`functional_map` over the same term for the mirror image; its operators in
+    the first k_s / k_t eigenpairs of ``source`` / ``target``). Below 1, C is closer to a map of the asked
+    orientation than to its mirror image; independent of the scale of C and of the descriptors.
+
+    Raises
+    ------
+    HamsaError
+        As :func:`orientation_operator`, or on an unknown ``orientation``.
+    """
+    C = np.asarray(C, dtype=np.float64)
+    bases = source.truncate(C.shape[0]), target.truncate(C.shape[1])
+    operators = _orientation_operators(*bases, source_descriptors, target_descriptors, meshes, orientation)
+    asked = sum(np.linalg.norm(C @ Ot - Os @ C) ** 2 for Os, Ot in operators)
+    mirror = sum(np.linalg.norm(C @ Ot + Os @ C) ** 2 for Os, Ot in operators)
+    return float(asked / max(mirror, 1e-300))
+
+
+def _check_orientation(orientation) -> None:
     if orientation not in ("preserving", "reversing"):
         raise HamsaError(f"orientation must be 'preserving' or 'reversing', got {orientation!r}")
-    if orientation_weight and meshes is None:
-        raise HamsaError("the orientation term needs the two meshes (meshes=(source, target))")
+
+
+def _scaled_descriptors(F, G) -> tuple[np.ndarray, np.ndarray]:
+    """F, G (n, d) with each column divided by max |f| on the source: the weights' units."""
     F, G = np.asarray(F, dtype=np.float64), np.asarray(G, dtype=np.float64)
     scales = np.maximum(np.abs(F).max(axis=0), 1e-300)
-    F, G = F / scales, G / scales
+    return F / scales, G / scales
+
+
+def _orientation_operators(source, target, F, G, meshes, orientation) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(+-O_f, O_g)] per descriptor pair, the source's sign flipped for a ``"reversing"`` orientation."""
+    _check_orientation(orientation)
+    F, G = _scaled_descriptors(F, G)
+    sign = -1.0 if orientation == "reversing" else 1.0
+    return [
+        (sign * Os, Ot)
+        for Os, Ot in zip(orientation_operator(meshes[0], source, F), orientation_operator(meshes[1], target, G))
+    ]
+
+
+def _operator_pairs(source, target, F, G, commutativity_weight, orientation_weight, meshes, orientation):
+    """[(weight, X_t, X_s)] of the terms ``weight ||C X_t - X_s C||^2`` beyond the Laplacian's."""
+    _check_orientation(orientation)
+    if orientation_weight and meshes is None:
+        raise HamsaError("the orientation term needs the two meshes (meshes=(source, target))")
     pairs = []
     if commutativity_weight:
         pairs += [
             (commutativity_weight, multiplication_operator(target, g), multiplication_operator(source, f))
-            for f, g in zip(F.T, G.T)
+            for f, g in zip(*(columns.T for columns in _scaled_descriptors(F, G)))
         ]
     if orientation_weight:
-        sign = -1.0 if orientation == "reversing" else 1.0
         pairs += [
-            (orientation_weight, Ot, sign * Os)
-            for Os, Ot in zip(orientation_operator(meshes[0], source, F), orientation_operator(meshes[1], target, G))
+            (orientation_weight, Ot, Os) for Os, Ot in _orientation_operators(source, target, F, G, meshes, orientation)
         ]
     return pairs
 

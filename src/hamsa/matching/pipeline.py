@@ -9,7 +9,7 @@ import numpy as np
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.matching.functional import functional_map, icp_refine, zoomout
+from hamsa.matching.functional import functional_map, icp_refine, orientation_ratio, zoomout
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
@@ -84,11 +84,11 @@ def match(
     commutativity_weight : the descriptor-commutativity weight of the functional map that starts ``fmap``
         and ``sgfe`` (:func:`~hamsa.matching.functional_map`; 0: the row-wise fit); the other methods ignore it
     orientation_weight : the weight of the orientation-preserving term of that functional map, which tells
-        a map from its mirror image (a left-right symmetric shape's HKS cannot); > 0 needs ``meshes`` that
-        are consistently oriented triangle meshes (a point cloud has no orientation). Surfaces whose normals
-        point opposite ways (signed volumes of opposite signs) are matched orientation-reversing, i.e. as the
-        same surface. Default 0: the term decides a mirror-symmetric pair (the built-in humanoid and its
-        mirror image) but at 0.03 it lowered the SCAPE scores (docs/results/matching.md).
+        a map from its mirror image (a left-right symmetric shape's HKS cannot): the start is fitted with and
+        without it and the one closer to the right orientation is kept (:func:`hks_functional_map`); > 0
+        needs ``meshes`` that are consistently oriented triangle meshes (a point cloud has no orientation).
+        Surfaces whose normals point opposite ways (signed volumes of opposite signs) are matched
+        orientation-reversing, i.e. as the same surface. Default 0 (docs/results/matching.md measures it).
 
     Raises
     ------
@@ -153,9 +153,14 @@ def hks_functional_map(
     """A (k, k) functional map fitted to 30 scaled HKS columns on the first k eigenpairs, refined by ICP:
     ``(C, map_source_to_target)``; the start of ``fmap`` and ``sgfe``. With ``landmarks`` (source ids,
     target ids), their heat kernel maps (:func:`hamsa.diffusion.landmark_descriptors`) join the HKS;
-    ``commutativity_weight``, ``orientation_weight``: those of :func:`functional_map` (both 0: the row-wise
-    fit); the orientation term needs ``meshes``, and is orientation-preserving with respect to each
-    surface's outward normals (the sign of its signed volume)."""
+    ``commutativity_weight``: that of :func:`functional_map` (0: the row-wise fit).
+
+    ``orientation_weight`` > 0 (needs ``meshes``) fits the map a second time with the orientation term
+    of :func:`functional_map`, orientation-preserving with respect to each surface's outward normals (the
+    sign of its signed volume), and keeps whichever of the two ICP-refined maps has the lower
+    :func:`~hamsa.matching.orientation_ratio`. The term's energy is homogeneous in C, so on its own it
+    shrinks C and can pull a good fit away; the ratio is scale-free and only asks which of the two maps
+    is closer to the right orientation than to its mirror image."""
     from hamsa.diffusion import default_hks_times, heat_kernel_signature, landmark_descriptors
 
     small = source.truncate(k), target.truncate(k)
@@ -167,10 +172,23 @@ def hks_functional_map(
             np.hstack([d, landmark_descriptors(basis, ids, kernel_times)])
             for d, basis, ids in zip(descriptors, (source, target), landmarks)
         ]
-    orientation = "preserving"
-    if orientation_weight and meshes is not None:
-        outward = [np.sign(as_trimesh(shape).signed_volume) or 1.0 for shape in meshes]
-        orientation = "preserving" if outward[0] == outward[1] else "reversing"
+    if not orientation_weight:
+        return _fitted_start(small, descriptors, commutativity_weight)
+    if meshes is None:
+        raise HamsaError("the orientation term needs the two meshes (meshes=(source, target))")
+    outward = [np.sign(as_trimesh(shape).signed_volume) or 1.0 for shape in meshes]
+    orientation = "preserving" if outward[0] == outward[1] else "reversing"
+    fits = [
+        _fitted_start(small, descriptors, commutativity_weight, weight, meshes, orientation)
+        for weight in (0.0, orientation_weight)
+    ]
+    return min(fits, key=lambda fit: orientation_ratio(fit[0], *small, *descriptors, meshes, orientation))
+
+
+def _fitted_start(
+    small, descriptors, commutativity_weight, orientation_weight=0.0, meshes=None, orientation="preserving"
+):
+    """``(C, map_source_to_target)``: :func:`functional_map` on the truncated bases, refined by ICP."""
     C = functional_map(
         *small,
         *descriptors,
