@@ -131,7 +131,13 @@ def orientation_ratio(
     """
     C = np.asarray(C, dtype=np.float64)
     bases = source.truncate(C.shape[0]), target.truncate(C.shape[1])
-    operators = _orientation_operators(*bases, source_descriptors, target_descriptors, meshes, orientation)
+    return _operator_ratio(
+        C, _orientation_operators(*bases, source_descriptors, target_descriptors, meshes, orientation)
+    )
+
+
+def _operator_ratio(C, operators) -> float:
+    """:func:`orientation_ratio` of C with its operators [(+-O_f, O_g)] already built."""
     asked = sum(np.linalg.norm(C @ Ot - Os @ C) ** 2 for Os, Ot in operators)
     mirror = sum(np.linalg.norm(C @ Ot + Os @ C) ** 2 for Os, Ot in operators)
     return float(asked / max(mirror, 1e-300))

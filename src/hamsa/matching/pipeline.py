@@ -9,7 +9,7 @@ import numpy as np
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.matching.functional import functional_map, icp_refine, orientation_ratio, zoomout
+from hamsa.matching.functional import _operator_ratio, _orientation_operators, functional_map, icp_refine, zoomout
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
@@ -190,7 +190,8 @@ def hks_functional_map(
         _fitted_start(small, descriptors, commutativity_weight, weight, meshes, orientation)
         for weight in (0.0, orientation_weight)
     )
-    ratios = [orientation_ratio(fit[0], *small, *descriptors, meshes, orientation) for fit in (plain, oriented)]
+    operators = _orientation_operators(*small, *descriptors, meshes, orientation)  # built once for both maps
+    ratios = [_operator_ratio(fit[0], operators) for fit in (plain, oriented)]
     return oriented if ratios[1] < min(ratios[0], ORIENTED_RATIO) else plain
 
 
