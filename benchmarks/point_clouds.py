@@ -42,7 +42,9 @@ METHODS = ("hks", "fmap", "icskm")
 REPRESENTATIONS = ("mesh", "cloud", "cloud 50%")
 
 
-def pair_scores(dataset, source_name: str, target_name: str, k: int, points: int) -> list[dict]:
+def pair_scores(
+    dataset, source_name: str, target_name: str, k: int, points: int, methods=METHODS, orientation: float = 0.0
+) -> list[dict]:
     """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair."""
     source, source_kept = dataset.load(source_name, largest_component=True)
     target, target_kept = dataset.load(target_name, largest_component=True)
@@ -65,7 +67,7 @@ def pair_scores(dataset, source_name: str, target_name: str, k: int, points: int
     rows = []
     for representation, (s, t, true_map) in shapes.items():
         start = time.perf_counter()
-        result = evaluate_pair(s, t, true_map, k, METHODS, points, landmarks=3)
+        result = evaluate_pair(s, t, true_map, k, methods, points, landmarks=3, orientation_weight=orientation)
         seconds = time.perf_counter() - start
         for row in result["rows"]:
             rows.append(
@@ -76,7 +78,7 @@ def pair_scores(dataset, source_name: str, target_name: str, k: int, points: int
     return rows
 
 
-def table(rows: list[dict]) -> tuple[str, list[str]]:
+def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
     """The markdown table of pair means and the list of bar failures."""
     lines = [
         "| dataset | method | representation | pairs | LBO AUC | H AUC | LBO within 0.05 | H within 0.05 |",
@@ -84,7 +86,7 @@ def table(rows: list[dict]) -> tuple[str, list[str]]:
     ]
     failures, mean = [], {}
     for dataset in dict.fromkeys(r["dataset"] for r in rows):
-        for method in METHODS:
+        for method in methods:
             for representation in REPRESENTATIONS:
                 cell = {}
                 for basis in ("lbo", "hamiltonian"):
@@ -116,6 +118,10 @@ def main(argv=None) -> int:
     parser.add_argument("-k", type=int, default=100)
     parser.add_argument("--points", type=int, default=1000)
     parser.add_argument("--jobs", type=int, default=1, help="pairs solved in parallel processes")
+    parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
+    parser.add_argument(
+        "--orientation", type=float, default=0.0, help="orientation-term weight of fmap's start map (default 0)"
+    )
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
@@ -132,13 +138,14 @@ def main(argv=None) -> int:
 
     start = time.perf_counter()
     results = Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
-        delayed(pair_scores)(dataset, s, t, args.k, args.points) for dataset, s, t in work
+        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation)
+        for dataset, s, t in work
     )
     rows = []
     for pair_rows in results:
         rows += pair_rows
         print(f"  {pair_rows[0]['dataset']} {pair_rows[0]['pair']} done", file=sys.stderr, flush=True)
-    text, failures = table(sorted(rows, key=lambda r: (r["dataset"] != "scape", r["pair"])))
+    text, failures = table(sorted(rows, key=lambda r: (r["dataset"] != "scape", r["pair"])), args.methods)
     print(f"hamsa {hamsa.__version__}, {len(work)} pairs, {time.perf_counter() - start:.0f} s wall")
     print(text)
     print("bar met" if not failures else "bar not met:\n  " + "\n  ".join(failures))

@@ -45,8 +45,9 @@ def functional_map(
     - descriptor commutativity, ``commutativity_weight * ||C M_g - M_f C||^2`` with the multiplication
       operators ``M_f = Psi_s^T A_s diag(f) Psi_s`` (:func:`multiplication_operator`);
     - orientation, ``orientation_weight * ||C O_g -+ O_f C||^2`` with ``O_f = int psi_i (N x grad f) . grad psi_j``
-      (:func:`orientation_operator`, needs ``meshes``): ``-`` for ``orientation="preserving"`` maps between
-      consistently oriented surfaces, ``+`` for ``"reversing"`` ones (a left-right symmetry).
+      (:func:`orientation_operator`, needs ``meshes``: triangle meshes or point clouds): ``-`` for
+      ``orientation="preserving"`` maps between consistently oriented surfaces, ``+`` for ``"reversing"``
+      ones (a left-right symmetry).
 
     With either term the energy couples all entries of C; its normal equations are assembled and solved
     densely, for at most :data:`MAX_COUPLED_UNKNOWNS` entries (fit on a truncated basis, then ZoomOut).
@@ -87,26 +88,46 @@ def multiplication_operator(basis: Eigenbasis, f) -> np.ndarray:
     return basis.vectors.T @ (basis.mass @ (f[:, None] * basis.vectors))
 
 
-def orientation_operator(mesh, basis: Eigenbasis, f) -> np.ndarray:
-    """``O_f[i, j] = int psi_i (N x grad f) . grad psi_j dA`` (k, k) on a triangle mesh, for f (n,), or one
-    per column, (d, k, k), for f (n, d): the derivative along the rotated gradient of f, in the basis. Exact
-    for P1 functions (per face, area x the mean of psi_i x the constant (N x grad f) . grad psi_j);
-    antisymmetric on a closed mesh, and its sign flips with the surface's orientation, which is what tells a
-    map from its mirror image."""
-    from hamsa.mesh import as_trimesh
-    from hamsa.operators import face_gradients
+def orientation_operator(shape, basis: Eigenbasis, f) -> np.ndarray:
+    """``O_f[i, j] = int psi_i (N x grad f) . grad psi_j dA`` (k, k) on a triangle mesh or a point cloud, for
+    f (n,), or one per column, (d, k, k), for f (n, d): the derivative along the rotated gradient of f, in
+    the basis. Antisymmetric on a closed surface, and its sign flips with the surface's orientation, which
+    is what tells a map from its mirror image.
 
-    mesh = as_trimesh(mesh)
+    On a mesh, exact for P1 functions (per face, area x the mean of psi_i x the constant
+    (N x grad f) . grad psi_j). On a :class:`~hamsa.PointCloud`, the same integrand at each point, weighted
+    by its lumped mass, with the cloud's outward normals and least-squares tangential gradients
+    (:meth:`~hamsa.PointCloud.gradients`), in its skew-symmetric form ``(O - O^T) / 2``: N x grad f is
+    divergence-free, so the exact operator is antisymmetric on a closed surface, and the symmetric part
+    of the pointwise sum is discretization error (on a cloud with boundary it also drops half the
+    boundary integral of psi_i psi_j times the derivative of f along the boundary)."""
+    from hamsa.pointcloud import PointCloud, as_shape
+
+    shape = as_shape(shape)
     f = np.asarray(f, dtype=np.float64)
-    if mesh.n_vertices != basis.n or f.ndim not in (1, 2) or f.shape[0] != basis.n:
-        raise HamsaError(f"mesh ({mesh.n_vertices} vertices), basis ({basis.n}) and f {f.shape} must agree")
-    columns = f.reshape(basis.n, -1)
-    faces = mesh.faces
-    rotated = np.cross(mesh.face_normals[:, :, None], face_gradients(mesh, columns), axis=1)  # (m, 3, d)
-    gradients = face_gradients(mesh, basis.vectors)  # (m, 3, k)
-    weighted_mean = mesh.face_areas[:, None] * basis.vectors[faces].mean(axis=1)  # (m, k)
-    operators = np.stack([weighted_mean.T @ np.einsum("mc,mck->mk", r, gradients) for r in rotated.T.swapaxes(1, 2)])
+    if shape.n_vertices != basis.n or f.ndim not in (1, 2) or f.shape[0] != basis.n:
+        raise HamsaError(f"shape ({shape.n_vertices} vertices), basis ({basis.n}) and f {f.shape} must agree")
+    normals, weighted_values, gradients = _gradient_quadrature(shape, basis.vectors)
+    rotated = np.cross(normals[:, :, None], gradients(f.reshape(basis.n, -1)), axis=1)  # (m, 3, d)
+    basis_gradients = gradients(basis.vectors)  # (m, 3, k)
+    operators = np.stack(
+        [weighted_values.T @ np.einsum("mc,mck->mk", r, basis_gradients) for r in rotated.T.swapaxes(1, 2)]
+    )
+    if isinstance(shape, PointCloud):  # the skew-symmetric form: N x grad f is divergence-free
+        operators = (operators - operators.swapaxes(1, 2)) / 2
     return operators[0] if f.ndim == 1 else operators
+
+
+def _gradient_quadrature(shape, vectors):
+    """The quadrature of the orientation operator: ``(normals (m, 3), weight x psi (m, k), gradients)``
+    over its m points (a mesh's faces, a cloud's points), ``gradients(columns (n, d)) -> (m, 3, d)``."""
+    from hamsa.operators import face_gradients
+    from hamsa.pointcloud import PointCloud
+
+    if isinstance(shape, PointCloud):
+        return shape.normals, shape.operators[1].diagonal()[:, None] * vectors, shape.gradients
+    weighted_mean = shape.face_areas[:, None] * vectors[shape.faces].mean(axis=1)
+    return shape.face_normals, weighted_mean, lambda columns: face_gradients(shape, columns)
 
 
 def orientation_ratio(

@@ -92,16 +92,16 @@ def match(
         a map from its mirror image (a left-right symmetric shape's HKS cannot): the start is fitted with and
         without it, and the term's fit is kept only when it is clearly the better oriented
         (:func:`hks_functional_map`); > 0
-        needs ``meshes`` that are consistently oriented triangle meshes (a point cloud has no orientation).
-        Surfaces whose normals point opposite ways (signed volumes of opposite signs) are matched
-        orientation-reversing, i.e. as the same surface. Default 0; 0.03 is the weight measured in
-        docs/results/matching.md.
+        needs ``meshes``: consistently oriented triangle meshes, or point clouds (their estimated outward
+        :attr:`~hamsa.PointCloud.normals`). Meshes whose normals point opposite ways (signed volumes of
+        opposite signs) are matched orientation-reversing, i.e. as the same surface. Default 0; 0.03 is the
+        weight measured in docs/results/matching.md.
 
     Raises
     ------
     HamsaError
         On an unknown method, a missing ``landmarks`` / ``meshes``, a negative or non-finite weight, or an
-        orientation weight > 0 without two consistently oriented triangle meshes.
+        orientation weight > 0 without two shapes, or with a mesh that is not consistently oriented.
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
@@ -126,12 +126,18 @@ def check_term_weight(term: str, weight) -> None:
 def _orientation_problem(meshes) -> str | None:
     """Why ``meshes`` cannot carry the orientation term (a phrase), or None when they can."""
     if meshes is None:
-        return "the two meshes (meshes=(source, target))"
-    if any(isinstance(shape, PointCloud) for shape in meshes):
-        return "triangle meshes (a point cloud has no orientation)"
-    if not all(as_trimesh(shape).is_consistently_oriented for shape in meshes):
+        return "the two shapes (meshes=(source, target))"
+    if not all(isinstance(shape, PointCloud) or as_trimesh(shape).is_consistently_oriented for shape in meshes):
         return "consistently oriented meshes (hamsa.repair.repair_mesh or --repair fixes the orientation)"
     return None
+
+
+def _outward_sign(shape) -> float:
+    """+1 where a shape's normals point outward, -1 where inward: a mesh's by the sign of its signed
+    volume; a point cloud's :attr:`~hamsa.PointCloud.normals` are outward by construction."""
+    if isinstance(shape, PointCloud):
+        return 1.0
+    return float(np.sign(as_trimesh(shape).signed_volume) or 1.0)
 
 
 def _hks(request):
@@ -163,8 +169,8 @@ def hks_functional_map(
     ``commutativity_weight``: that of :func:`functional_map` (0: the row-wise fit).
 
     ``orientation_weight`` > 0 (needs ``meshes``) fits the map a second time with the orientation term
-    of :func:`functional_map`, orientation-preserving with respect to each surface's outward normals (the
-    sign of its signed volume), and keeps that ICP-refined map only if its
+    of :func:`functional_map`, orientation-preserving with respect to each surface's outward normals (a
+    mesh's by the sign of its signed volume, a point cloud's estimated), and keeps that ICP-refined map only if its
     :func:`~hamsa.matching.orientation_ratio` is lower than the plain one's and below
     :data:`ORIENTED_RATIO` (clearly closer to the right orientation than to the mirror image). The term's
     energy is homogeneous in C, so on its own it shrinks C and can pull a good fit away; the ratio is
@@ -184,8 +190,7 @@ def hks_functional_map(
         return _fitted_start(small, descriptors, commutativity_weight)
     if meshes is None:
         raise HamsaError("the orientation term needs the two meshes (meshes=(source, target))")
-    outward = [np.sign(as_trimesh(shape).signed_volume) or 1.0 for shape in meshes]
-    orientation = "preserving" if outward[0] == outward[1] else "reversing"
+    orientation = "preserving" if _outward_sign(meshes[0]) == _outward_sign(meshes[1]) else "reversing"
     plain, oriented = (
         _fitted_start(small, descriptors, commutativity_weight, weight, meshes, orientation)
         for weight in (0.0, orientation_weight)
