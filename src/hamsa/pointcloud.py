@@ -226,15 +226,6 @@ class PointCloud:
         return PointCloud(self._points[indices], neighbors=self.neighbors, mollify=self.mollify)
 
 
-def outward_normals(shape) -> np.ndarray:
-    """(n, 3) unit normals at the vertices, pointing outward: a mesh's area-weighted vertex normals times the
-    sign of its signed volume, a cloud's estimated :attr:`PointCloud.normals`."""
-    shape = as_shape(shape)
-    if isinstance(shape, PointCloud):
-        return shape.normals
-    return (np.sign(shape.signed_volume) or 1.0) * shape.vertex_normals
-
-
 def as_shape(shape_like) -> TriMesh | PointCloud:
     """A :class:`PointCloud` as it is, anything else through :func:`hamsa.mesh.as_trimesh`."""
     if isinstance(shape_like, PointCloud):

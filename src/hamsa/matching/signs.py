@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.matching.nearest import nearest_in
+from hamsa.mesh import TriMesh
 
 
 def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, indices) -> np.ndarray:
@@ -41,14 +42,14 @@ def resolve_signs_without_truth(
       depend on signs, so these moments correspond between near-isometric shapes; they vanish for a
       function that an intrinsic left-right symmetry reverses (psi_j o T = -psi_j), because h_t is
       symmetric.
-    - with ``meshes`` (the two triangle meshes or point clouds), **chirality** ``det(n_t, n_u, x_j)`` for
-      pairs of times t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal,
-      :func:`hamsa.pointcloud.outward_normals`: a cloud's are estimated from its points) and
-      ``x_j = int psi_j (X - X_mean) dA`` (the function's first moment in space), each vector normalized.
-      The determinant is unchanged by rotations, translations and scaling and reverses under a
-      reflection, so it tells an antisymmetric function from its mirror image — which no intrinsic
-      quantity can — and it is largest exactly where the moments vanish. Without ``meshes`` the
-      antisymmetric functions' signs of a left-right symmetric shape are a coin toss.
+    - with ``meshes`` (the two triangle meshes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times
+      t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal, N oriented so that the signed
+      volume is positive) and ``x_j = int psi_j (X - X_mean) dA`` (the function's first moment in space),
+      each vector normalized. The determinant is unchanged by rotations, translations and scaling and
+      reverses under a reflection, so it tells an antisymmetric function from its mirror image — which
+      no intrinsic quantity can — and it is largest exactly where the moments vanish. It needs the
+      surfaces' orientation, so point clouds get the moments alone; on a left-right symmetric cloud the
+      antisymmetric functions' signs are then a coin toss.
 
     Like :func:`resolve_signs` it assumes the functions correspond in order (no swap of near-equal
     eigenvalues) and shapes posed alike up to a rigid motion; a reflected scan gives the mirrored signs.
@@ -67,6 +68,7 @@ def resolve_signs_without_truth(
         raise HamsaError(f"indices must be below k = {k}")
     times = default_hks_times(source, int(scales))
     shapes = (None, None) if meshes is None else tuple(as_shape(shape) for shape in meshes)
+    oriented = all(isinstance(shape, TriMesh) for shape in shapes)
     features = []
     for basis, shape in zip((source, target), shapes):
         if shape is not None and shape.n_vertices != basis.n:
@@ -76,7 +78,7 @@ def resolve_signs_without_truth(
         heat = heat / (weights @ heat)
         functions = basis.vectors[:, indices]
         parts = [(weights[:, None] * heat).T @ functions]  # (T, m) moments
-        if shape is not None:
+        if oriented:
             parts.append(_chirality(shape, weights, heat, functions))
         features.append(np.concatenate(parts))
     return np.where(np.sum(features[0] * features[1], axis=0) >= 0, 1.0, -1.0)
@@ -101,12 +103,11 @@ def matching_potentials(
     return V_s / V_s.max(), V_t / V_t.max()
 
 
-def _chirality(shape, weights: np.ndarray, heat: np.ndarray, functions: np.ndarray) -> np.ndarray:
+def _chirality(mesh: TriMesh, weights: np.ndarray, heat: np.ndarray, functions: np.ndarray) -> np.ndarray:
     """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of :func:`resolve_signs_without_truth`."""
-    from hamsa.pointcloud import outward_normals
-
-    centred = shape.vertices - weights @ shape.vertices / weights.sum()
-    normals = (weights[:, None] * heat).T @ outward_normals(shape)  # (T, 3)
+    outward = np.sign(mesh.signed_volume) or 1.0
+    centred = mesh.vertices - weights @ mesh.vertices / weights.sum()
+    normals = (weights[:, None] * heat).T @ (outward * mesh.vertex_normals)  # (T, 3)
     moments = functions.T @ (weights[:, None] * centred)  # (m, 3)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
     moments /= np.maximum(np.linalg.norm(moments, axis=1, keepdims=True), 1e-300)
