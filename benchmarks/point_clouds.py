@@ -36,7 +36,6 @@ from scipy.spatial import cKDTree
 import hamsa
 from hamsa.datasets import load_scape, load_tosca
 from hamsa.paper.benchmark import dataset_pairs, evaluate_pair, identity_truth
-from hamsa.repair import repair_mesh
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 METHODS = ("hks", "fmap", "icskm")
@@ -47,8 +46,8 @@ def pair_scores(
     dataset, source_name: str, target_name: str, k: int, points: int, methods=METHODS, orientation: float = 0.0
 ) -> list[dict]:
     """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair."""
-    source, source_kept = _oriented(*dataset.load(source_name, largest_component=True))
-    target, target_kept = _oriented(*dataset.load(target_name, largest_component=True))
+    source, source_kept = dataset.load(source_name, largest_component=True)
+    target, target_kept = dataset.load(target_name, largest_component=True)
     source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
     truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
     rng = np.random.default_rng(0)
@@ -77,15 +76,6 @@ def pair_scores(
                  "within_0.05": row["within_0.05"], "seconds": seconds}
             )  # fmt: skip
     return rows
-
-
-def _oriented(mesh, kept):
-    """The mesh with its faces' orientation made consistent where it is not (TOSCA's horse5; the orientation
-    term needs it), and the original ids of its vertices."""
-    if mesh.is_consistently_oriented:
-        return mesh, kept
-    repaired, repaired_kept, _ = repair_mesh(mesh.vertices, mesh.faces)
-    return repaired, kept[repaired_kept]
 
 
 def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:

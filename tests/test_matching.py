@@ -491,7 +491,10 @@ def test_signs_without_truth_ignore_rigid_motions_winding_and_a_common_reflectio
     assert inward.signed_volume == pytest.approx(-walk_mesh.signed_volume)
     mirror = np.diag([-1.0, 1.0, 1.0])
     mirrored = tuple(hamsa.TriMesh(m.vertices @ mirror, m.faces) for m in (rest_mesh, walk_mesh))
-    for meshes in ((rest_mesh, moved), (rest_mesh, inward), mirrored):
+    faces = walk_mesh.faces.copy()
+    faces[::50] = faces[::50, ::-1]  # 2% of the faces flipped: the chirality orients them first
+    flipped = hamsa.TriMesh(walk_mesh.vertices, faces)
+    for meshes in ((rest_mesh, moved), (rest_mesh, inward), mirrored, (rest_mesh, flipped)):
         np.testing.assert_array_equal(resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=meshes), expected)
 
 
@@ -965,16 +968,18 @@ def test_the_orientation_term_tells_a_map_from_its_mirror_image():
     )
 
 
-def test_an_orientation_weight_without_oriented_meshes_is_refused():
+def test_an_orientation_weight_without_shapes_is_refused_and_flipped_faces_are_oriented_first():
     rest, image, _ = mirrored_humanoid()
     bases = [hamsa.eigenbasis(mesh, 24) for mesh in (rest, image)]
     with pytest.raises(HamsaError, match="orientation term .* needs the two shapes"):
         hamsa.matching.match(*bases, "fmap", orientation_weight=0.1)
     faces = image.faces.copy()
-    faces[0] = faces[0, ::-1]  # one face flipped
+    faces[::50] = faces[::50, ::-1]  # 2% of the faces flipped: oriented consistently first, the same map
     unoriented = hamsa.TriMesh(image.vertices, faces)
-    with pytest.raises(HamsaError, match="consistently oriented meshes"):
-        hamsa.matching.match(*bases, "fmap", meshes=(rest, unoriented), orientation_weight=0.1)
+    np.testing.assert_array_equal(
+        hamsa.matching.match(*bases, "fmap", meshes=(rest, unoriented), orientation_weight=0.1),
+        hamsa.matching.match(*bases, "fmap", meshes=(rest, image), orientation_weight=0.1),
+    )
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(HamsaError, match="orientation weight must be finite"):
             hamsa.matching.match(*bases, "fmap", meshes=(rest, image), orientation_weight=bad)

@@ -8,7 +8,7 @@ from hamsa import shapes
 from hamsa.cli import main
 from hamsa.errors import MeshError, RepairWarning
 from hamsa.io import load_mesh, save_mesh
-from hamsa.repair import repair_mesh
+from hamsa.repair import orient_faces, repair_mesh
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +85,8 @@ def test_what_has_no_single_fix_is_still_refused():
         faces += [[a, b, d], [a, d, c]]
     with pytest.raises(MeshError, match="not orientable"):
         repair_mesh(vertices, np.array(faces))
+    with pytest.raises(MeshError, match="not orientable"):
+        orient_faces(hamsa.TriMesh(vertices, np.array(faces)))
 
 
 def test_load_mesh_repair_warns_and_the_cli_warns_on_what_is_only_unusual_then_repairs(tmp_path, ico, capsys):
@@ -121,3 +123,16 @@ def test_load_mesh_repair_warns_and_the_cli_warns_on_what_is_only_unusual_then_r
     with np.load(out) as saved:
         np.testing.assert_array_equal(saved["vertex_ids"], ico.n_vertices + np.arange(ico.n_vertices))
     assert hamsa.Eigenbasis.load(out).n == ico.n_vertices
+
+
+def test_orient_faces_restores_the_outward_faces_and_keeps_the_vertices(ico):
+    assert orient_faces(ico) is ico  # already consistent: returned as it is
+    faces = ico.faces.copy()
+    faces[::7] = faces[::7, ::-1]
+    mixed = hamsa.TriMesh(ico.vertices, faces)
+    assert not mixed.is_consistently_oriented
+    oriented = orient_faces(mixed)
+    np.testing.assert_array_equal(oriented.vertices, ico.vertices)
+    np.testing.assert_array_equal(oriented.faces, ico.faces)  # every face as it was, outward
+    inward = orient_faces(hamsa.TriMesh(ico.vertices, np.vstack([ico.faces[:1], ico.faces[1:, ::-1]])))
+    np.testing.assert_array_equal(inward.faces, ico.faces)  # a closed piece is turned outward

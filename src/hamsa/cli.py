@@ -71,8 +71,8 @@ COMMUTATIVITY_HELP = (
 )
 ORIENTATION_HELP = (
     "orientation-preserving weight of that functional map, which tells a map from its mirror image (a left-right "
-    "symmetric shape's descriptors cannot), kept only where it gives the better oriented map; needs consistently "
-    "oriented meshes (--repair fixes the orientation) or point clouds (default 0; 0.03 is the measured weight)"
+    "symmetric shape's descriptors cannot), kept only where it gives the better oriented map; meshes' faces are "
+    "oriented consistently first, point clouds' normals estimated (default 0; 0.03 is the measured weight)"
 )
 POINTS_HELP = "a point cloud (.xyz .pts .txt .npy, or a .ply / .off / .obj without faces)"
 

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from hamsa.errors import MeshError
-from hamsa.mesh import TriMesh
+from hamsa.mesh import TriMesh, as_trimesh
 
 
 @dataclass(frozen=True)
@@ -94,6 +94,24 @@ def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray
     new_index = np.cumsum(used) - 1
     mesh = TriMesh(vertices[used], new_index[faces])
     return mesh, kept[used], RepairReport(**counts)
+
+
+def orient_faces(mesh) -> TriMesh:
+    """The mesh with its faces flipped so that neighbours traverse shared edges in opposite directions and
+    each closed piece faces outward: the same vertices in the same order (the orientation repair of
+    :func:`repair_mesh`, alone). A consistently oriented mesh is returned as it is. The Laplacian and the
+    mass do not depend on the orientation; normals, the signed volume and everything built on them do.
+
+    Raises
+    ------
+    MeshError
+        If the surface is not orientable.
+    """
+    mesh = as_trimesh(mesh)
+    if mesh.is_consistently_oriented:
+        return mesh
+    faces, _ = _orient(mesh.vertices, mesh.faces)
+    return TriMesh(mesh.vertices, faces, manifold=mesh.is_edge_manifold)
 
 
 def _face_graph(faces: np.ndarray):

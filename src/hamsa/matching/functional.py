@@ -95,8 +95,10 @@ def orientation_operator(shape, basis: Eigenbasis, f) -> np.ndarray:
     is what tells a map from its mirror image.
 
     On a mesh, exact for P1 functions (per face, area x the mean of psi_i x the constant
-    (N x grad f) . grad psi_j). On a :class:`~hamsa.PointCloud`, the same integrand at each point, weighted
-    by its lumped mass, with the cloud's outward normals and least-squares tangential gradients
+    (N x grad f) . grad psi_j), with the faces oriented consistently first
+    (:func:`hamsa.repair.orient_faces`; a MeshError if the surface is not orientable). On a
+    :class:`~hamsa.PointCloud`, the same integrand at each point, weighted by its lumped mass, with the
+    cloud's outward normals and least-squares tangential gradients
     (:meth:`~hamsa.PointCloud.gradients`), in its skew-symmetric form ``(O - O^T) / 2``: N x grad f is
     divergence-free, so the exact operator is antisymmetric on a closed surface, and the symmetric part
     of the pointwise sum is discretization error (on a cloud with boundary it also drops half the
@@ -123,9 +125,11 @@ def _gradient_quadrature(shape, vectors):
     over its m points (a mesh's faces, a cloud's points), ``gradients(columns (n, d)) -> (m, 3, d)``."""
     from hamsa.operators import face_gradients
     from hamsa.pointcloud import PointCloud
+    from hamsa.repair import orient_faces
 
     if isinstance(shape, PointCloud):
         return shape.normals, shape.operators[1].diagonal()[:, None] * vectors, shape.gradients
+    shape = orient_faces(shape)  # the rotated gradient N x grad f follows each face's orientation
     weighted_mean = shape.face_areas[:, None] * vectors[shape.faces].mean(axis=1)
     return shape.face_normals, weighted_mean, lambda columns: face_gradients(shape, columns)
 

@@ -13,8 +13,8 @@ from hamsa.matching.functional import _operator_ratio, _orientation_operators, f
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
-from hamsa.mesh import as_trimesh
 from hamsa.pointcloud import PointCloud
+from hamsa.repair import orient_faces
 
 METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
 # the functional map that starts fmap and sgfe is fitted on this many eigenpairs
@@ -92,7 +92,8 @@ def match(
         a map from its mirror image (a left-right symmetric shape's HKS cannot): the start is fitted with and
         without it, and the term's fit is kept only when it is clearly the better oriented
         (:func:`hks_functional_map`); > 0
-        needs ``meshes``: consistently oriented triangle meshes, or point clouds (their estimated outward
+        needs ``meshes``: triangle meshes (faces oriented consistently first,
+        :func:`~hamsa.repair.orient_faces`) or point clouds (their estimated outward
         :attr:`~hamsa.PointCloud.normals`). Meshes whose normals point opposite ways (signed volumes of
         opposite signs) are matched orientation-reversing, i.e. as the same surface. Default 0; 0.03 is the
         weight measured in docs/results/matching.md.
@@ -101,7 +102,7 @@ def match(
     ------
     HamsaError
         On an unknown method, a missing ``landmarks`` / ``meshes``, a negative or non-finite weight, or an
-        orientation weight > 0 without two shapes, or with a mesh that is not consistently oriented.
+        orientation weight > 0 without two shapes (a MeshError if a mesh is not orientable).
     """
     if method not in _MATCHERS:
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
@@ -127,17 +128,16 @@ def _orientation_problem(meshes) -> str | None:
     """Why ``meshes`` cannot carry the orientation term (a phrase), or None when they can."""
     if meshes is None:
         return "the two shapes (meshes=(source, target))"
-    if not all(isinstance(shape, PointCloud) or as_trimesh(shape).is_consistently_oriented for shape in meshes):
-        return "consistently oriented meshes (hamsa.repair.repair_mesh or --repair fixes the orientation)"
     return None
 
 
 def _outward_sign(shape) -> float:
-    """+1 where a shape's normals point outward, -1 where inward: a mesh's by the sign of its signed
-    volume; a point cloud's :attr:`~hamsa.PointCloud.normals` are outward by construction."""
+    """+1 where a shape's normals point outward, -1 where inward: a mesh's by the sign of the signed volume
+    of its consistently oriented faces (:func:`~hamsa.repair.orient_faces`); a point cloud's
+    :attr:`~hamsa.PointCloud.normals` are outward by construction."""
     if isinstance(shape, PointCloud):
         return 1.0
-    return float(np.sign(as_trimesh(shape).signed_volume) or 1.0)
+    return float(np.sign(orient_faces(shape).signed_volume) or 1.0)
 
 
 def _hks(request):

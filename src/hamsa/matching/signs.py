@@ -43,13 +43,13 @@ def resolve_signs_without_truth(
       function that an intrinsic left-right symmetry reverses (psi_j o T = -psi_j), because h_t is
       symmetric.
     - with ``meshes`` (the two triangle meshes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times
-      t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal, N oriented so that the signed
-      volume is positive) and ``x_j = int psi_j (X - X_mean) dA`` (the function's first moment in space),
-      each vector normalized. The determinant is unchanged by rotations, translations and scaling and
-      reverses under a reflection, so it tells an antisymmetric function from its mirror image — which
-      no intrinsic quantity can — and it is largest exactly where the moments vanish. It needs the
-      surfaces' orientation, so point clouds get the moments alone; on a left-right symmetric cloud the
-      antisymmetric functions' signs are then a coin toss.
+      t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal, the faces oriented
+      consistently and N so that the signed volume is positive) and ``x_j = int psi_j (X - X_mean) dA``
+      (the function's first moment in space), each vector normalized. The determinant is unchanged by
+      rotations, translations and scaling and reverses under a reflection, so it tells an antisymmetric
+      function from its mirror image — which no intrinsic quantity can — and it is largest exactly where
+      the moments vanish. Point clouds get the moments alone (docs/any-geometry.md says why); on a
+      left-right symmetric cloud the antisymmetric functions' signs are then a coin toss.
 
     Like :func:`resolve_signs` it assumes the functions correspond in order (no swap of near-equal
     eigenvalues) and shapes posed alike up to a rigid motion; a reflected scan gives the mirrored signs.
@@ -105,6 +105,9 @@ def matching_potentials(
 
 def _chirality(mesh: TriMesh, weights: np.ndarray, heat: np.ndarray, functions: np.ndarray) -> np.ndarray:
     """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of :func:`resolve_signs_without_truth`."""
+    from hamsa.repair import orient_faces
+
+    mesh = orient_faces(mesh)  # a few flipped faces would bend the near-cancelling mean normals
     outward = np.sign(mesh.signed_volume) or 1.0
     centred = mesh.vertices - weights @ mesh.vertices / weights.sum()
     normals = (weights[:, None] * heat).T @ (outward * mesh.vertex_normals)  # (T, 3)
