@@ -108,12 +108,13 @@ def match(
         raise HamsaError(f"unknown matching method {method!r}; known: {', '.join(METHODS)}")
     check_term_weight("commutativity", commutativity_weight)
     check_term_weight("orientation", orientation_weight)
-    problem = _orientation_problem(meshes) if orientation_weight else None
-    if problem:
-        raise HamsaError(
-            f"the orientation term (orientation_weight, hamsa match --orientation) needs {problem}; "
-            "set it to 0 to go without it"
-        )
+    if orientation_weight:
+        if meshes is None:
+            raise HamsaError(
+                "the orientation term (orientation_weight, hamsa match --orientation) needs the two shapes "
+                "(meshes=(source, target)); set it to 0 to go without it"
+            )
+        meshes = tuple(shape if isinstance(shape, PointCloud) else orient_faces(shape) for shape in meshes)  # once
     request = _Request(source, target, landmarks, meshes, progress, commutativity_weight, orientation_weight)
     return _MATCHERS[method](request)
 
@@ -122,13 +123,6 @@ def check_term_weight(term: str, weight) -> None:
     """Raise a HamsaError unless ``weight`` is a finite number >= 0 (a weight of the start map's ``term``)."""
     if not (isinstance(weight, (int, float, np.number)) and np.isfinite(weight) and weight >= 0):
         raise HamsaError(f"the {term} weight must be finite and >= 0, got {weight}")
-
-
-def _orientation_problem(meshes) -> str | None:
-    """Why ``meshes`` cannot carry the orientation term (a phrase), or None when they can."""
-    if meshes is None:
-        return "the two shapes (meshes=(source, target))"
-    return None
 
 
 def _outward_sign(shape) -> float:
