@@ -12,7 +12,7 @@ demo: $(VENV)/.fast $(VENV)/.viz
 test: $(VENV)/.fast $(VENV)/.viz $(VENV)/.test $(VENV)/.docs
 	$(BIN)/python -m pytest
 
-bench: $(VENV)/.fast $(VENV)/.test
+bench: $(VENV)/.fast $(VENV)/.bench
 	$(BIN)/python benchmarks/eigensolve.py
 
 lint: $(VENV)/.test
@@ -38,6 +38,10 @@ $(VENV)/.core: $(BIN)/python pyproject.toml
 # CHOLMOD is optional: the script never fails, it says what it could not install.
 $(VENV)/.fast: $(VENV)/.core
 	sh tools/install-cholmod.sh $(BIN)
+	touch $@
+
+$(VENV)/.bench: $(VENV)/.core
+	$(BIN)/pip install -q -e ".[bench]"
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
