@@ -2,7 +2,15 @@
 # Best-effort install of CHOLMOD (scikit-sparse, the [fast] extra) into the virtual environment $1/..
 # Needs Debian's libsuitesparse-dev; installs it when running as root with apt-get available.
 # Without it hamsa still works and falls back to SciPy's SuperLU (slower), saying so once.
+# Debian's CHOLMOD calls whichever libblas.so.3 the system selects: the unoptimized reference BLAS unless an
+# optimized one is installed, so the script also installs OpenBLAS (libopenblas0-pthread) when it can.
 BIN="$1"
+if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && ! ls /usr/lib/*/openblas-pthread/libblas.so.3 >/dev/null 2>&1; then
+    (apt-get install -y -qq libopenblas0-pthread >/dev/null 2>&1 \
+        || (apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq libopenblas0-pthread >/dev/null 2>&1)) \
+        && echo "OpenBLAS installed (the BLAS behind CHOLMOD's supernodal kernels)" \
+        || echo "notice: could not install OpenBLAS; CHOLMOD uses the system's default BLAS (hamsa config shows which)"
+fi
 if "$BIN/python" -c "import sksparse.cholmod" 2>/dev/null; then
     exit 0
 fi

@@ -1,9 +1,12 @@
 """Sparse Cholesky factorizations of symmetric positive definite matrices, reused across solves.
 
-CHOLMOD (scikit-sparse, the ``[fast]`` extra) when it is installed: supernodal, BLAS-3 solves with
-many right-hand sides, and a symbolic analysis that is kept when only the values change (a new
-potential changes only the diagonal of H). Without it, SciPy's SuperLU in symmetric mode (minimum
-degree on A + A^T, diagonal pivoting), with a one-time notice saying how to get CHOLMOD.
+CHOLMOD (scikit-sparse, the ``[fast]`` extra) when it is installed: a simplicial LDL^T factorization
+with a METIS ordering, and a symbolic analysis that is kept when only the values change (a new
+potential changes only the diagonal of H). Inside the Krylov solver (blocks of 8 right-hand sides between
+dense BLAS work) it is as fast as CHOLMOD's supernodal kernel with OpenBLAS at 200k vertices and faster at
+50k, where the supernodal kernel's BLAS threads compete with NumPy's; it also factors indefinite matrices.
+Without CHOLMOD, SciPy's SuperLU in symmetric mode (minimum degree on A + A^T, diagonal pivoting), with a
+one-time notice saying how to get CHOLMOD.
 """
 
 from __future__ import annotations
@@ -28,8 +31,7 @@ BACKENDS = ("auto", "cholmod", "superlu")
 
 
 def _cholmod_symbolic(matrix):
-    """Simplicial LDL^T with a METIS ordering: on surface meshes its solves with many right-hand sides
-    beat the supernodal default with Debian's reference BLAS."""
+    """Simplicial LDL^T with a METIS ordering (see the module docstring for why not supernodal)."""
     try:
         return _cholmod_analyze(matrix, mode="simplicial", ordering_method="metis")
     except Exception:  # CHOLMOD built without METIS

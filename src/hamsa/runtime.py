@@ -1,9 +1,10 @@
 """What hamsa runs on here: versions, the sparse factorization and the BLAS behind it, threads, a GPU.
 
 ``hamsa.show_config()`` (and ``hamsa config`` on the command line) prints it; ``configuration()`` returns
-it as a dict for scripts and bug reports. The BLAS matters for speed: CHOLMOD's supernodal solves are
-BLAS-3, and Debian's CHOLMOD uses whichever ``libblas.so.3`` the system selects — the slow reference BLAS
-unless an optimized one (e.g. ``libopenblas0-pthread``) is installed.
+it as a dict for scripts and bug reports. The BLAS matters for CHOLMOD's supernodal kernel (the default
+of ``sksparse.cholmod.cholesky``, e.g. in the eigsh + CHOLMOD baseline; hamsa's own factorization is
+simplicial): Debian's CHOLMOD uses whichever ``libblas.so.3`` the system selects — the slow reference BLAS
+unless an optimized one (e.g. ``libopenblas0-pthread``, which ``make`` installs when it can) is there.
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ def configuration() -> dict:
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "numpy_blas": _numpy_blas(),
-        "factorization": "CHOLMOD (scikit-sparse)"
+        "factorization": "CHOLMOD (scikit-sparse), simplicial LDL^T, METIS ordering"
         if HAVE_CHOLMOD
         else "SciPy SuperLU (install hamsa[fast] for CHOLMOD)",
     }
