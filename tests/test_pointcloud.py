@@ -229,6 +229,27 @@ def test_cloud_gradients_converge_to_the_tangential_gradient():
         hamsa.PointCloud(p).gradients(np.ones(5))
 
 
+def test_normals_and_gradients_in_memory_bounded_chunks_equal_the_whole_computation(monkeypatch):
+    import hamsa.pointcloud as pointcloud
+
+    points = hamsa.shapes.icosphere(3).vertices
+    whole = hamsa.PointCloud(points)
+    normals, gradient = whole.normals, whole.gradient_matrix  # computed in one chunk each
+    chunks = pointcloud._chunks
+    sizes = []
+
+    def small(n, values_per_row, budget=2**23):  # a budget of a few rows: many chunks, the last one short
+        pieces = list(chunks(n, values_per_row, budget=7 * values_per_row))
+        sizes.append([piece.stop - piece.start for piece in pieces])
+        return iter(pieces)
+
+    monkeypatch.setattr(pointcloud, "_chunks", small)
+    chunked = hamsa.PointCloud(points)
+    np.testing.assert_array_equal(chunked.normals, normals)
+    np.testing.assert_allclose((chunked.gradient_matrix - gradient).toarray(), 0.0, atol=1e-12)
+    assert len(sizes) == 2 and all(sum(s) == len(points) and max(s) == 7 and min(s) >= 1 for s in sizes)
+
+
 def test_cloud_orientation_operator_follows_the_mesh_operator_and_flips_with_a_mirror_image(humanoid_pair):
     from hamsa.diffusion import default_hks_times, heat_kernel_signature
     from hamsa.matching import orientation_operator

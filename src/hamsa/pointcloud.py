@@ -159,9 +159,12 @@ class PointCloud:
         divergence theorem: outward on a closed piece). Where sheets nearly touch or a part is thinner than
         the neighbourhood, a few points can get the wrong sign (about 1% on SCAPE's bodies)."""
         distances, indices = self._neighbourhoods
-        spread = self._points[indices] - self._points[indices].mean(axis=1, keepdims=True)
-        normals = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
         n = self.n_vertices
+        normals = np.empty((n, 3))
+        for rows in _chunks(n, indices.shape[1] * 3):  # (chunk, neighbors + 1, 3) at a time: bounded memory
+            neighbourhood = self._points[indices[rows]]
+            spread = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
+            normals[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
         rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
         columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
         alignment = np.abs(np.einsum("ij,ij->i", normals[rows], normals[columns]))
@@ -190,14 +193,17 @@ class PointCloud:
         _, indices = self._neighbourhoods
         neighbours = indices[:, 1 : GRADIENT_NEIGHBORS + 1]
         n, normals = self.n_vertices, self.normals
-        helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-        first = np.cross(normals, helper)
-        first /= np.linalg.norm(first, axis=1, keepdims=True)
-        frame = np.stack([first, np.cross(normals, first)], axis=1)  # (n, 2, 3) tangent axes
-        offsets = self._points[neighbours] - self._points[:, None, :]  # (n, K, 3)
-        u, v = np.einsum("nkc,nac->ank", offsets, frame)  # (n, K) tangent coordinates
-        fit = np.linalg.pinv(np.stack([u, v, u * u, u * v, v * v], axis=2))[:, :2]  # (n, 2, K)
-        weights = np.einsum("nak,nac->nck", fit, frame)  # (n, 3, K): gradient = sum_k w_k (f_k - f_p)
+        weights = np.empty((n, 3, GRADIENT_NEIGHBORS))  # gradient at p = sum_k w_k (f_k - f_p)
+        for chunk in _chunks(n, 16 * GRADIENT_NEIGHBORS):  # the fit's (chunk, K, 5) arrays: bounded memory
+            normal = normals[chunk]
+            helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+            first = np.cross(normal, helper)
+            first /= np.linalg.norm(first, axis=1, keepdims=True)
+            frame = np.stack([first, np.cross(normal, first)], axis=1)  # (chunk, 2, 3) tangent axes
+            offsets = self._points[neighbours[chunk]] - self._points[chunk, None, :]  # (chunk, K, 3)
+            u, v = np.einsum("nkc,nac->ank", offsets, frame)  # (chunk, K) tangent coordinates
+            fit = np.linalg.pinv(np.stack([u, v, u * u, u * v, v * v], axis=2))[:, :2]  # (chunk, 2, K)
+            weights[chunk] = np.einsum("nak,nac->nck", fit, frame)
         rows = np.repeat(np.arange(3 * n), GRADIENT_NEIGHBORS)
         columns = np.repeat(neighbours[:, None, :], 3, axis=1).reshape(-1)
         G = sp.csr_matrix((weights.reshape(-1), (rows, columns)), shape=(3 * n, n))
@@ -224,6 +230,13 @@ class PointCloud:
         if indices.size and (indices.min() < 0 or indices.max() >= self.n_vertices):
             raise MeshError(f"indices must be in [0, {self.n_vertices})")
         return PointCloud(self._points[indices], neighbors=self.neighbors, mollify=self.mollify)
+
+
+def _chunks(n: int, values_per_row: int, budget: int = 2**23):
+    """Slices covering range(n) in order, each of at most ``budget`` / ``values_per_row`` rows (at least
+    one): per-point work on (rows, values_per_row) float arrays stays near 8 x budget bytes (64 MB) each."""
+    step = max(1, budget // max(1, values_per_row))
+    return (slice(start, min(start + step, n)) for start in range(0, n, step))
 
 
 def as_shape(shape_like) -> TriMesh | PointCloud:
