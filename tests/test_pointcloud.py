@@ -212,6 +212,10 @@ def test_cloud_normals_point_outward_and_agree_with_the_mesh(humanoid_pair):
     pieces = hamsa.PointCloud(np.vstack([sphere.points, sphere.points * 0.5 + 3.0]))  # each piece outward
     radial = np.vstack([sphere.points, sphere.points])
     assert (np.einsum("ij,ij->i", pieces.normals, radial) > 0.99).all()
+    ball = hamsa.shapes.icosphere(2).vertices  # 60 balls, 162 points each: every one outward on its own
+    offsets = 5.0 * np.stack(np.meshgrid(np.arange(5), np.arange(4), np.arange(3)), axis=-1).reshape(-1, 1, 3)
+    many = hamsa.PointCloud((ball[None] * np.linspace(0.5, 1.5, 60)[:, None, None] + offsets).reshape(-1, 3))
+    assert (np.einsum("ij,ij->i", many.normals, np.tile(ball, (60, 1))) > 0.99).all()
 
 
 def test_cloud_gradients_converge_to_the_tangential_gradient():

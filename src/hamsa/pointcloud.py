@@ -172,15 +172,11 @@ class PointCloud:
         graph = sp.csr_matrix((weights, (rows, columns)), shape=(n, n))
         tree = minimum_spanning_tree(graph.maximum(graph.T))
         count, labels = connected_components(tree, directed=False)
-        for piece in range(count):
-            members = np.flatnonzero(labels == piece)
-            order, parent = breadth_first_order(tree, int(members[0]), directed=False, return_predecessors=True)
-            for i in order[1:]:  # breadth first: a parent's sign is final before its children's
-                if normals[i] @ normals[parent[i]] < 0:
-                    normals[i] = -normals[i]
-            centred = self._points[members] - self._points[members].mean(axis=0)
-            if np.einsum("ij,ij->", normals[members], centred) < 0:
-                normals[members] = -normals[members]
+        normals[_flips_along_forest(tree, normals, labels, count)] *= -1
+        pieces = np.bincount(labels, minlength=count)[:, None]
+        centroids = np.stack([np.bincount(labels, self._points[:, d], count) for d in range(3)], axis=1) / pieces
+        volumes = np.bincount(labels, np.einsum("ij,ij->i", normals, self._points - centroids[labels]), count)
+        normals[volumes[labels] < 0] *= -1
         normals.flags.writeable = False
         return normals
 
@@ -230,6 +226,27 @@ class PointCloud:
         if indices.size and (indices.min() < 0 or indices.max() >= self.n_vertices):
             raise MeshError(f"indices must be in [0, {self.n_vertices})")
         return PointCloud(self._points[indices], neighbors=self.neighbors, mollify=self.mollify)
+
+
+def _flips_along_forest(tree: sp.spmatrix, normals: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+    """(n,) bool: which normals to flip so that each agrees in sign with its parent in the spanning forest
+    ``tree`` (pieces ``labels``, each rooted at its first point). A point is flipped when an odd number of
+    the tree edges on its path to the root join normals of opposite sign: one breadth-first search from a
+    virtual root joined to every piece's root, then the parities summed up the paths by pointer jumping
+    (log2 of the depth vectorized steps, not a Python loop over the points)."""
+    n = len(normals)
+    roots = np.unique(labels, return_index=True)[1]
+    virtual = sp.csr_matrix((np.ones(count), (np.full(count, n), roots)), shape=(n + 1, n + 1))
+    forest = sp.block_diag([tree, sp.csr_matrix((1, 1))]).tocsr() + virtual
+    _, parent = breadth_first_order(forest, n, directed=False, return_predecessors=True)
+    parent[n] = n
+    odd = np.zeros(n + 1, dtype=bool)
+    odd[:n] = np.einsum("ij,ij->i", normals, normals[np.minimum(parent[:n], n - 1)]) < 0
+    odd[roots] = False  # a root's parent is the virtual root
+    while np.any(parent != n):
+        odd ^= odd[parent]
+        parent = parent[parent]
+    return odd[:n]
 
 
 def _chunks(n: int, values_per_row: int, budget: int = 2**23):
