@@ -4,7 +4,7 @@ CHOLMOD (scikit-sparse, the ``[fast]`` extra) when it is installed: a simplicial
 with a METIS ordering, and a symbolic analysis that is kept when only the values change (a new
 potential changes only the diagonal of H). Inside the Krylov solver (blocks of 8 right-hand sides between
 dense BLAS work) it is as fast as CHOLMOD's supernodal kernel with OpenBLAS at 200k vertices and faster at
-50k, where the supernodal kernel's BLAS threads compete with NumPy's; it also factors indefinite matrices.
+50k, where the supernodal kernel's BLAS threads compete with NumPy's.
 Without CHOLMOD, SciPy's SuperLU in symmetric mode (minimum degree on A + A^T, diagonal pivoting), with a
 one-time notice saying how to get CHOLMOD.
 """
