@@ -64,6 +64,10 @@ METHODS = ("auto", "krylov", "dense", "chebyshev")
 _DENSE_MAX_N = 1500  # "auto" uses the dense solver up to this many vertices
 _DENSE_LIMIT_N = 20000  # beyond this a dense solve would need > 3 GB: refused
 _FORMAT_VERSION = 1
+# Krylov steps whose second Gram-Schmidt pass waits for the next settling step (see _extend)
+_DEFERRED_BLOCKS = 3
+# a step settles at once when its first pass left less than this fraction of a column's A-norm
+_CANCELLATION = 1e-3
 
 
 @dataclass(frozen=True)
@@ -663,7 +667,12 @@ def _orthonormalize(Z: np.ndarray, mass, floor: float) -> tuple[np.ndarray, np.n
 
 
 class _MassOperator:
-    """Applies A (diagonal fast path) and the diagonal A^-1 weights used in residual norms."""
+    """The mass matrix A as the solvers use it: products (a diagonal fast path), A-norms, the diagonal
+    A^-1 weights of residual norms, and Gram-Schmidt passes in the A inner product.
+
+    The passes write their (n, m) temporaries into two buffers kept for the whole solve: fresh arrays of
+    that size cost page faults on every pass, a third of a pass's time at 200k vertices.
+    """
 
     def __init__(self, A: sp.spmatrix):
         self.matrix = A.tocsr()
@@ -671,57 +680,58 @@ class _MassOperator:
         self.is_diagonal = A.nnz == np.count_nonzero(diagonal)
         self.diagonal = diagonal
         self.inverse_diagonal = 1.0 / diagonal
+        self._buffers = [np.empty((A.shape[0], 0), order="F") for _ in range(2)]
 
-    def __call__(self, X: np.ndarray) -> np.ndarray:
+    def __call__(self, X: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         if self.is_diagonal:
-            return X * self.diagonal[:, None] if X.ndim == 2 else X * self.diagonal
+            return np.multiply(X, self.diagonal[:, None] if X.ndim == 2 else self.diagonal, out=out)
         return self.matrix @ X
 
+    def norms(self, X: np.ndarray) -> np.ndarray:
+        """The A-norms of the columns of X (n, m)."""
+        if self.is_diagonal:
+            return np.sqrt(np.einsum("ij,ij,i->j", X, X, self.diagonal))
+        return np.sqrt(np.maximum(np.einsum("ij,ij->j", X, self.matrix @ X), 0.0))
 
-def _orthogonalize(Z, Q, AQ, mass, local: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Remove from Z its A-projection on span(Q) (Q A-orthonormal; AQ = A Q, or None when A is diagonal
-    and applied on the fly).
+    def buffer(self, slot: int, columns: int) -> np.ndarray:
+        """Scratch (n, columns), F-ordered: slot 0 or 1, overwritten by the next pass."""
+        if self._buffers[slot].shape[1] < columns:
+            self._buffers[slot] = np.empty((self.matrix.shape[0], columns), order="F")
+        return self._buffers[slot][:, :columns]
 
-    Classical Gram-Schmidt, BLAS-3, in two passes ("twice is enough", Kahan-Parlett). With ``local`` > 0
-    the first pass uses only the columns ``Q[:, local:]``: in a block Lanczos step, S times the frontier
-    block is (in exact arithmetic) A-orthogonal to every column before the previous block, so the first
-    pass removes everything but rounding and the single pass over all of Q that follows is the second one
-    — half the reads of the (n, m) basis, which is what this step costs (it is memory-bound). A further
-    full pass only where that one still removed most of a column (the DGKS test). Returns (Z_out, C) with
-    ``Z_in = Q @ C + Z_out``.
-    """
-
-    def project(X, start):
-        basis = Q[:, start:]
-        C = basis.T @ mass(X) if AQ is None else AQ[:, start:].T @ X
-        X -= basis @ C
+    def project_out(self, X: np.ndarray, basis: np.ndarray, a_basis=None) -> np.ndarray:
+        """One classical Gram-Schmidt pass, in place: ``X -= basis @ C`` with ``C = basis.T A X`` (basis
+        A-orthonormal; ``a_basis`` = A basis, or None to apply A to X); returns C."""
+        if a_basis is None:
+            C = basis.T @ self(X, out=self.buffer(0, X.shape[1]) if self.is_diagonal else None)
+        else:
+            C = a_basis.T @ X
+        X -= np.matmul(basis, C, out=self.buffer(1, X.shape[1]))
         return C
 
-    Z = np.array(Z, order="F", copy=True)
-    coefficients = np.zeros((Q.shape[1], Z.shape[1]))
-    coefficients[local:] = project(Z, local)
-    passes = 1
-    while passes < 3:
-        before = np.einsum("ij,ij->j", Z, mass(Z))
-        coefficients += project(Z, 0)
-        passes += 1
-        after = np.einsum("ij,ij->j", Z, mass(Z))
-        if not np.any(after < 0.5 * before):
-            break
-    return Z, coefficients
-
-
-def _columns(matrix, stop):
-    return None if matrix is None else matrix[:, :stop]
+    def orthogonalize(self, Z: np.ndarray, Q: np.ndarray, AQ=None) -> np.ndarray:
+        """Remove from Z, in place, its A-projection on span(Q) (Q A-orthonormal; AQ = A Q, or None to
+        apply A on the fly): classical Gram-Schmidt, BLAS-3, a further pass only where the one before
+        removed most of a column (the DGKS test; "twice is enough", Kahan-Parlett). Returns C with
+        ``Z_in = Q @ C + Z_out``; an F-ordered Z is fastest."""
+        coefficients = np.zeros((Q.shape[1], Z.shape[1]))
+        for _ in range(3):
+            before = self.norms(Z)
+            coefficients += self.project_out(Z, Q, AQ)
+            if not np.any(self.norms(Z) < 0.5 * before):
+                break
+        return coefficients
 
 
 def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, spectral_scale, progress=None):
     """Block Krylov-Schur for the dominant eigenpairs of S = (H - shift A)^-1 A in <.,.>_A.
 
-    Invariant: Q = [closed | frontier] is A-orthonormal, ``S Q_closed = Q T[:, closed]`` exactly up to
-    rounding, and T (the projection of S) is known on every column but the frontier's. The Ritz pairs
-    (theta, y) of T_closed then have the residual ``S x - theta x = Q_f (T[f, closed] y)``, and in the
-    original pencil ``H x - E A x = -(H - shift A) Q_f T[f, closed] y / theta`` with E = shift + 1/theta:
+    Invariant: Q = [closed | frontier] holds ``S Q_closed = Q T[:, closed]`` exactly up to rounding, and
+    T (the projection of S) is known on every column but the frontier's. Q[:, :settled] is A-orthonormal;
+    the later columns are so only up to a second Gram-Schmidt pass, deferred to the next settling step
+    (see :func:`_extend`), and the solver checks, restarts and stops only after a settling step. The Ritz
+    pairs (theta, y) of T_closed then have the residual ``S x - theta x = Q_f (T[f, closed] y)``, and in
+    the original pencil ``H x - E A x = -(H - shift A) Q_f T[f, closed] y / theta`` with E = shift + 1/theta:
     exact residual norms at the cost of one sparse product with the frontier block.
     """
     n = H.shape[0]
@@ -746,8 +756,10 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         raise SolverError(f"k = {k} is too large for the sparse solver on n = {n}: use method='dense'")
     # A Q is kept only for a full mass matrix; a diagonal one is applied on the fly (half the memory)
     copies = 1 if mass.is_diagonal else 2
-    # the basis (and its A-image), the projected matrix and its eigenvectors, and the Ritz vectors with residuals
-    need = 8 * (copies * n * capacity + 3 * capacity * capacity + 3 * n * wanted)
+    # the basis (and its A-image), the projected matrix and its eigenvectors, the Ritz vectors with
+    # residuals, and a settling step's pending blocks with the buffers of its pass
+    settling = 3 * n * (_DEFERRED_BLOCKS + 1) * block
+    need = 8 * (copies * n * capacity + 3 * capacity * capacity + 3 * n * wanted + settling)
     require_memory(need, f"the Krylov basis for k = {k} eigenpairs of n = {n} ({copies} x {capacity} columns)")
     Q = np.empty((n, capacity), order="F")  # column blocks are contiguous
     AQ = None if mass.is_diagonal else np.empty((n, capacity), order="F")
@@ -757,17 +769,24 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         AQ[:, :width] = mass(Q[:, :width])
     f0, f1 = 0, width  # frontier columns
     local = 0  # S Q_frontier is A-orthogonal to the columns before this one (exactly: up to rounding)
+    settled = f1  # Q[:, :settled] is A-orthonormal to rounding; later columns wait for their second pass
+    # light steps (second pass deferred) between settling ones; none when the basis may fill the space
+    defer = _DEFERRED_BLOCKS if capacity < n else 0
+    light = 0
     solves, cycles = 0, 1
     since_check, check_every = 0, max(1, wanted // (4 * block))
     while True:
-        Qn, AQn = _extend(factor, Q, AQ, T, f0, f1, capacity, block, mass, local, rng)
+        check_due = f1 >= wanted and since_check + 1 >= check_every
+        settle = light >= defer or check_due or f1 + 2 * (f1 - f0) > capacity
+        Qn, AQn, settled_now = _extend(factor, Q, AQ, T, f0, f1, settled, settle, capacity, block, mass, local, rng)
         solves += f1 - f0
         bn = Qn.shape[1]
         since_check += 1
-        restart = f1 + 2 * bn > capacity or bn == 0
+        light = 0 if settled_now else light + 1
+        restart = f1 + 2 * bn > capacity or bn == 0  # only after a settling step
         # Rayleigh-Ritz on the closed part, every few blocks (an eigh of T per block would cost more
-        # than the solves) and before every restart
-        if restart or (f1 >= wanted and since_check >= check_every):
+        # than the solves) and before every restart, on a settled basis
+        if restart or (settled_now and f1 >= wanted and since_check >= check_every):
             since_check = 0
             theta, Y, W, E, residual = _ritz(H, T, f1, bn, min(wanted, f1), k, Qn, AQn, shift, mass, spectral_scale)
             _report(progress, np.sum(residual[:k] <= tol), k)
@@ -786,6 +805,8 @@ def _block_krylov(H, A, k, *, shift, tol, backend, initial, factor, max_cycles, 
         else:
             local = f0
             f0, f1 = f1, f1 + bn
+        if settled_now:
+            settled = f1
         Q[:, f0:f1] = Qn
         if AQ is not None:
             AQ[:, f0:f1] = AQn
@@ -808,29 +829,101 @@ def _start_block(n: int, block: int, initial, rng, mass) -> np.ndarray:
     return first
 
 
-def _extend(factor, Q, AQ, T, f0, f1, capacity, block, mass, local, rng):
-    """One block Krylov step: ``Z = S Q_frontier``, orthogonalized against Q[:, :f1] (coefficients into T's
-    frontier columns and rows); returns the A-orthonormal new block (Qn, A Qn), its coupling B written into
-    T below the frontier. An invariant subspace continues from fresh random directions."""
-    n = Q.shape[0]
-    Z = factor.solve(mass(Q[:, f0:f1]))
-    floor = 1e-13 * np.sqrt(np.einsum("ij,ij->j", Z, mass(Z))).max()
-    Z, coefficients = _orthogonalize(Z, Q[:, :f1], _columns(AQ, f1), mass, local)
-    T[:f1, f0:f1] = coefficients
-    T[f0:f1, :f1] = coefficients.T
-    T[f0:f1, f0:f1] = (coefficients[f0:f1] + coefficients[f0:f1].T) / 2
-    room = capacity - f1
-    Qn, AQn, B = _orthonormalize(Z, mass, floor)
-    if Qn.shape[1] > room:  # only when the basis is the whole space (capacity == n): S Q is in span(Q)
-        Qn, AQn, B = Qn[:, :0], AQn[:, :0], B[:0]
-    if Qn.shape[1] == 0 and room > 0:  # an invariant subspace: continue from fresh random directions
-        Z, _ = _orthogonalize(rng.standard_normal((n, min(block, room))), Q[:, :f1], _columns(AQ, f1), mass)
-        Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
-        B = np.zeros((Qn.shape[1], f1 - f0))
+def _cholesky_qr(X: np.ndarray, mass) -> np.ndarray:
+    """Replaces X, in place, by the A-orthonormal P with ``X = P R``, R upper triangular; returns R. For
+    nearly A-orthonormal X (Cholesky QR loses orthogonality as cond(X)^2, about 1 here). Triangular, so
+    span(P[:, :j]) = span(X[:, :j]) for every j: a block Krylov basis stays one."""
+    gram = X.T @ mass(X, out=mass.buffer(0, X.shape[1]) if mass.is_diagonal else None)
+    R = np.linalg.cholesky((gram + gram.T) / 2).T
+    X[:] = np.matmul(X, np.linalg.inv(R), out=mass.buffer(1, X.shape[1]))
+    return R
+
+
+def _columns(matrix, start, stop):
+    return None if matrix is None else matrix[:, start:stop]
+
+
+def _extend(factor, Q, AQ, T, f0, f1, settled, settle, capacity, block, mass, local, rng):
+    """One block Krylov step ``Z = S Q[:, f0:f1]`` (S Q_frontier), orthogonalized and A-orthonormalized into
+    the new block (Qn, A Qn); its coefficients go into T's frontier columns and rows, its coupling B below
+    them. Returns (Qn, AQn, whether the step settled the basis).
+
+    In exact arithmetic Z is A-orthogonal to every column before ``local`` (the previous block's first),
+    so one Gram-Schmidt pass over Q[:, local:f1] leaves only rounding there, and a second pass over all of
+    Q removes it. That pass reads the whole (n, f1) basis and is what a step costs (it is memory-bound),
+    so it is deferred: a step that does not ``settle`` keeps its new block after the local pass alone
+    (pending; the columns Q[:, settled:f1] are pending), and a settling step takes all pending columns and
+    Z through one joint pass over Q[:, :settled] (:func:`_settle`). A step settles anyway when its local
+    pass removed most of a column (the rounding left behind would be amplified) or its block loses rank.
+    An invariant subspace continues from fresh random directions.
+    """
+    n, width = Q.shape[0], f1 - f0
+    Z = np.asfortranarray(factor.solve(mass(Q[:, f0:f1])))
+    norms = mass.norms(Z)
+    floor = 1e-13 * norms.max()
+    coefficients = np.zeros((f1, width))
+    coefficients[local:] = mass.project_out(Z, Q[:, local:f1], _columns(AQ, local, f1))
+    settle = settle or bool(np.any(mass.norms(Z) < _CANCELLATION * norms))
+    if not settle:
+        Qn, AQn, B = _orthonormalize(Z, mass, floor)
+        settle = Qn.shape[1] < width
+    if not settle:
+        T[:f1, f0:f1] = coefficients
+        T[f0:f1, :f1] = coefficients.T
+        T[f0:f1, f0:f1] = (coefficients[f0:f1] + coefficients[f0:f1].T) / 2
+    else:
+        Z, frontier_scale = _settle(Q, AQ, T, Z, coefficients, f0, f1, settled, mass)
+        room = capacity - f1
+        Qn, AQn, B = _orthonormalize(Z, mass, floor)
+        B = B @ frontier_scale
+        if Qn.shape[1] > room:  # only when the basis is the whole space (capacity == n): S Q is in span(Q)
+            Qn, AQn, B = Qn[:, :0], AQn[:, :0], B[:0]
+        if Qn.shape[1] == 0 and room > 0:  # an invariant subspace: continue from fresh random directions
+            Z = np.asfortranarray(rng.standard_normal((n, min(block, room))))
+            mass.orthogonalize(Z, Q[:, :f1], _columns(AQ, 0, f1))
+            Qn, AQn, _ = _orthonormalize(Z, mass, 1e-8)
+            B = np.zeros((Qn.shape[1], width))
     bn = Qn.shape[1]
     T[f1 : f1 + bn, f0:f1] = B
     T[f0:f1, f1 : f1 + bn] = B.T
-    return Qn, AQn
+    return Qn, AQn, settle
+
+
+def _settle(Q, AQ, T, Z, coefficients, f0, f1, settled, mass):
+    """The deferred pass of :func:`_extend`: the pending columns Q[:, settled:f1] and Z (after its local
+    pass, with ``coefficients`` (f1, b) on the columns as they were) jointly orthogonalized against
+    Q[:, :settled]; the pending columns A-orthonormalized in place by a triangular R, and Z against them.
+
+    T follows the change of basis exactly: ``Q_old[:, settled:f1] = Q[:, :settled] C + Q_new[:, settled:f1] R``
+    means ``Q_old = Q_new G^-1`` with ``G^-1 = [[I, C], [0, R]]``, so ``S Q_new = Q_new (G^-1 T G)``. Writes
+    T[:f1, :f1] (symmetrized) and returns Z, A-orthogonal to all of Q[:, :f1], and the frontier's block of
+    R^-1, by which the frontier's coupling to the next block scales.
+    """
+    pending, width = f1 - settled, f1 - f0
+    if pending:  # the joint block in place, Z in the columns the next block will take (always free)
+        Q[:, f1 : f1 + width] = Z
+        Z = Q[:, f1 : f1 + width]
+    G = mass.orthogonalize(Q[:, settled : f1 + width] if pending else Z, Q[:, :settled], _columns(AQ, 0, settled))
+    T[:f1, f0:f1] = coefficients  # S Q_old[:, f] in the old basis
+    view = T[:f1, :f1]
+    frontier_scale = np.eye(width)
+    if pending:
+        C = G[:, :pending]
+        P = Q[:, settled:f1]
+        R = _cholesky_qr(P, mass)
+        if AQ is not None:
+            AQ[:, settled:f1] = mass(P)
+        view[:settled] += C @ view[settled:]  # rows: T <- G^-1 T
+        view[settled:] = R @ view[settled:]
+        view[settled:, f0:] += mass.orthogonalize(Z, P, _columns(AQ, settled, f1))
+        R_inverse = np.linalg.inv(R)
+        view[:settled, f0:] += G[:, pending:]
+        view[:, settled:] = (view[:, settled:] - view[:, :settled] @ C) @ R_inverse  # columns: T <- T G
+        frontier_scale = R_inverse[-width:, -width:]
+    else:
+        view[:, f0:] += G
+    view[:] = (view + view.T) / 2
+    return Z, frontier_scale
 
 
 def _ritz(H, T, f1, bn, m, k, Qn, AQn, shift, mass, spectral_scale):
