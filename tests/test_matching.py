@@ -403,17 +403,40 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
     assert summary(geodesic_errors(target, mapping[points], points))["mean_error"] < 0.05  # measured 0.038
 
 
+@pytest.mark.parametrize("method", ["tree", "scan"])
 @pytest.mark.parametrize("dimension", [3, 20, 100])
-def test_nearest_rows_equals_a_distance_scan(dimension):
+def test_nearest_rows_equals_a_distance_scan(dimension, method):
     from scipy.spatial.distance import cdist
 
     from hamsa.matching import nearest_rows
 
     rng = np.random.default_rng(dimension)
     points, queries = rng.standard_normal((700, dimension)), rng.standard_normal((3000, dimension))
-    np.testing.assert_array_equal(nearest_rows(queries, points), cdist(queries, points).argmin(axis=1))
+    found = nearest_rows(queries, points, method=method)
+    np.testing.assert_array_equal(found, cdist(queries, points).argmin(axis=1))
     with pytest.raises(HamsaError, match="same d"):
-        nearest_rows(queries, points[:, :-1] if dimension > 1 else points[:, None])
+        nearest_rows(queries, points[:, :-1] if dimension > 1 else points[:, None], method=method)
+    with pytest.raises(HamsaError, match="no points"):
+        nearest_rows(queries, points[:0], method=method)
+
+
+def test_scan_is_exact_where_the_expansion_cancels_and_breaks_ties_by_index():
+    """Points a hair apart far from the origin: |y|^2 - 2 x.y loses the digits that tell them apart
+    (ranking by it alone picks a wrong point for most queries); the scan re-ranks its near ties exactly."""
+    from scipy.spatial.distance import cdist
+
+    from hamsa.matching.nearest import scan_nearest_rows
+
+    rng = np.random.default_rng(3)
+    centre = np.full(8, 1e5)
+    points = centre + 1e-6 * rng.standard_normal((400, 8))
+    queries = centre + 1e-6 * rng.standard_normal((500, 8))
+    expansion = np.argmin(np.einsum("ij,ij->i", points, points) - 2 * queries @ points.T, axis=1)
+    truth = cdist(queries - centre, points - centre).argmin(axis=1)
+    assert np.mean(expansion != truth) > 0.5
+    np.testing.assert_array_equal(scan_nearest_rows(queries, points), truth)
+    doubled = np.vstack([points, points])  # every point twice: the lower index wins
+    np.testing.assert_array_equal(scan_nearest_rows(queries, doubled), truth)
 
 
 def test_cli_match_refuses_bad_landmarks(tmp_path, pair, capsys):

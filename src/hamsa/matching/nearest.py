@@ -1,4 +1,4 @@
-"""Exact nearest neighbours in spectral embeddings and descriptor spaces (k-d trees)."""
+"""Exact nearest neighbours in spectral embeddings and descriptor spaces (k-d trees, and a distance scan)."""
 
 from __future__ import annotations
 
@@ -7,24 +7,71 @@ from scipy.spatial import cKDTree
 
 from hamsa.errors import HamsaError
 
+_SCAN_BLOCK_BYTES = 2**25  # distances held at once by the scan
 
-def nearest_rows(queries: np.ndarray, points: np.ndarray) -> np.ndarray:
+
+def nearest_rows(queries: np.ndarray, points: np.ndarray, method: str = "tree") -> np.ndarray:
     """For each row of ``queries`` (q, d), the index (q,) of the nearest row of ``points`` (p, d) (Euclidean).
 
-    An exact k-d tree search at any d: spectral embeddings and kernel signatures of a surface have
-    intrinsic dimension about 2, so a tree stays ahead of a dense distance scan even at d = 100
-    (``benchmarks/nearest_neighbours.py`` measures both).
+    Both methods are exact. ``"tree"``, a k-d tree, suits queries that lie on or near the point set:
+    spectral embeddings and kernel signatures of a surface have intrinsic dimension about 2, so there it
+    stays ahead of a distance scan even at d = 100. ``"scan"`` (:func:`scan_nearest_rows`) suits queries
+    far from the points in many dimensions, where a tree's pruning fails: the images of a functional map
+    (``benchmarks/nearest_neighbours.py`` measures both kinds).
 
     Raises
     ------
     HamsaError
-        If the arrays are not 2-D with the same number of columns.
+        If the arrays are not 2-D with the same number of columns, there are no points, or the method
+        is unknown.
     """
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     points = np.ascontiguousarray(points, dtype=np.float64)
     if queries.ndim != 2 or points.ndim != 2 or queries.shape[1] != points.shape[1]:
         raise HamsaError(f"need (q, d) and (p, d) arrays with the same d, got {queries.shape} and {points.shape}")
+    if len(points) == 0:
+        raise HamsaError("there are no points to search")
+    if method == "scan":
+        return scan_nearest_rows(queries, points)
+    if method != "tree":
+        raise HamsaError(f"method must be 'tree' or 'scan', got {method!r}")
     return nearest_in(cKDTree(points), queries)
+
+
+def scan_nearest_rows(queries: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Exact nearest rows (q,) of ``points`` (p, d) to ``queries`` (q, d) by a blocked distance scan.
+
+    Each block ranks the points by ``|y|^2 - 2 x.y`` (one matrix product, on every BLAS thread). That
+    expansion cancels digits when x and y are close to each other and far from 0, so every point within
+    its rounding bound, ``4 (d + 2) eps (|x|^2 + max |y|^2)``, of the best one is ranked again by the
+    directly computed ``|x - y|^2`` (ties: the lowest index).
+    """
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    squared = np.einsum("ij,ij->i", points, points)
+    bound = 4 * (points.shape[1] + 2) * np.finfo(np.float64).eps
+    block = max(1, _SCAN_BLOCK_BYTES // (8 * max(1, len(points))))
+    nearest = np.empty(len(queries), dtype=np.int64)
+    for start in range(0, len(queries), block):
+        x = queries[start : start + block]
+        ranks = x @ points.T
+        ranks *= -2.0
+        ranks += squared
+        best = np.argmin(ranks, axis=1)
+        rows = np.arange(len(x))
+        threshold = ranks[rows, best] + bound * (np.einsum("ij,ij->i", x, x) + squared.max())
+        ranks[rows, best] = np.inf
+        contested = np.flatnonzero(ranks.min(axis=1) <= threshold)  # a second point within the bound
+        if len(contested):
+            ranks[contested, best[contested]] = -np.inf
+            near_rows, near_points = np.nonzero(ranks[contested] <= threshold[contested, None])
+            difference = x[contested[near_rows]] - points[near_points]
+            exact = np.einsum("ij,ij->i", difference, difference)
+            order = np.lexsort((near_points, exact, near_rows))  # per row: nearest, then lowest index
+            first = order[np.r_[True, near_rows[order][1:] != near_rows[order][:-1]]]
+            best[contested[near_rows[first]]] = near_points[first]
+        nearest[start : start + block] = best
+    return nearest
 
 
 def nearest_in(tree: cKDTree, queries: np.ndarray) -> np.ndarray:
