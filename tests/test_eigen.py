@@ -378,11 +378,18 @@ def test_deferred_second_passes_give_the_settled_solvers_eigenpairs(sphere_5k, m
     monkeypatch.setattr(eigen, "_extend", counting)
     deferred = solve(sphere_5k, 40, method="krylov")
     assert sum(light) >= 3
+    cancellation = eigen._CANCELLATION
+    monkeypatch.setattr(eigen, "_CANCELLATION", 1.0)  # every first pass "cancels": every step settles
+    light.clear()
+    cancelled = solve(sphere_5k, 40, method="krylov")
+    assert not any(light)
+    monkeypatch.setattr(eigen, "_CANCELLATION", cancellation)
     monkeypatch.setattr(eigen, "_DEFERRED_BLOCKS", 0)
     light.clear()
     settled = solve(sphere_5k, 40, method="krylov")
     assert not any(light)
     np.testing.assert_allclose(deferred.values, settled.values, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(cancelled.values, settled.values, rtol=1e-12, atol=1e-12)
     assert relative_residuals(deferred)[1:].max() < 1e-9
     gram = deferred.vectors.T @ (deferred.mass @ deferred.vectors)
     assert np.abs(gram - np.eye(40)).max() < 1e-12
