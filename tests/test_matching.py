@@ -403,7 +403,7 @@ def test_three_landmarks_resolve_the_symmetry_flip_on_scape():
     assert summary(geodesic_errors(target, mapping[points], points))["mean_error"] < 0.05  # measured 0.038
 
 
-@pytest.mark.parametrize("method", ["tree", "scan"])
+@pytest.mark.parametrize("method", ["tree", "scan", "auto"])
 @pytest.mark.parametrize("dimension", [3, 20, 100])
 def test_nearest_rows_equals_a_distance_scan(dimension, method):
     from scipy.spatial.distance import cdist

@@ -9,19 +9,14 @@ Psi_t, ``C = Psi_s^T A_s Pi Psi_t`` (k_s, k_t), with Pi[y, map(y)] = 1, so that 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.matching.icp import alternate, procrustes
-from hamsa.matching.nearest import nearest_in, nearest_rows
+from hamsa.matching.nearest import nearest_rows
 
 # the coupled functional-map fit solves a dense system of (k_s k_t)^2 entries: 4096 unknowns = 128 MiB
 MAX_COUPLED_UNKNOWNS = 4096
-# The images Psi_s C of a functional map lie off the target's embedding, where a k-d tree's pruning fails
-# in many dimensions: from this many coordinates map_from_functional scans all distances instead
-# (benchmarks/nearest_neighbours.py, "functional-map images").
-SCAN_FROM = 64
 
 
 def functional_map(
@@ -234,12 +229,13 @@ def _coupled_solve(rhs, gram, laplacian_weight, ls, lt, ridge, pairs) -> np.ndar
 
 def map_from_functional(C: np.ndarray, source: Eigenbasis, target: Eigenbasis) -> np.ndarray:
     """``map_source_to_target`` (n_s,) from a functional map C (k_s, k_t): nearest neighbours of the rows of
-    ``Psi_s C`` among the rows of ``Psi_t`` (exact; by a distance scan from :data:`SCAN_FROM` target
-    coordinates, a k-d tree below)."""
+    ``Psi_s C`` among the rows of ``Psi_t`` (exact). Those images lie off the target's embedding, where a
+    k-d tree's pruning fails in many dimensions: the search is ``nearest_rows(..., method="auto")``, a tree
+    or a distance scan, whichever is faster on a sample."""
     C = np.asarray(C)
     if C.shape != (source.k, target.k):
         raise HamsaError(f"C has shape {C.shape}, expected ({source.k}, {target.k})")
-    return nearest_rows(source.vectors @ C, target.vectors, method="scan" if target.k >= SCAN_FROM else "tree")
+    return nearest_rows(source.vectors @ C, target.vectors, method="auto")
 
 
 def functional_from_map(map_source_to_target, source: Eigenbasis, target: Eigenbasis) -> np.ndarray:
@@ -262,11 +258,10 @@ def icp_refine(
     C = np.asarray(C, dtype=np.float64)
     if C.shape != (source.k, target.k):
         raise HamsaError(f"C has shape {C.shape}, expected ({source.k}, {target.k})")
-    tree = cKDTree(target.vectors)
     weights = source.mass.diagonal()
 
     def nearest(C):
-        return nearest_in(tree, source.vectors @ C)
+        return nearest_rows(source.vectors @ C, target.vectors, method="auto")
 
     def fit(mapping):
         return procrustes(source.vectors.T @ (weights[:, None] * target.vectors[mapping]))

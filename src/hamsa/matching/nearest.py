@@ -2,22 +2,28 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from hamsa.errors import HamsaError
 
 _SCAN_BLOCK_BYTES = 2**25  # distances held at once by the scan
+_PROBE = 256  # queries timed by method="auto"
 
 
 def nearest_rows(queries: np.ndarray, points: np.ndarray, method: str = "tree") -> np.ndarray:
     """For each row of ``queries`` (q, d), the index (q,) of the nearest row of ``points`` (p, d) (Euclidean).
 
-    Both methods are exact. ``"tree"``, a k-d tree, suits queries that lie on or near the point set:
+    Every method is exact. ``"tree"``, a k-d tree, suits queries that lie on or near the point set:
     spectral embeddings and kernel signatures of a surface have intrinsic dimension about 2, so there it
-    stays ahead of a distance scan even at d = 100. ``"scan"`` (:func:`scan_nearest_rows`) suits queries
-    far from the points in many dimensions, where a tree's pruning fails: the images of a functional map
-    (``benchmarks/nearest_neighbours.py`` measures both kinds).
+    stays ahead of a distance scan even at d = 100. ``"scan"`` (:func:`scan_nearest_rows`, cost q p d)
+    suits queries far from the points in many dimensions, where a tree's pruning fails: the images of an
+    imperfect functional map. ``"auto"`` (from 2048 queries; a tree below) times both on 256 evenly
+    spaced queries and runs the faster on all of them (``benchmarks/nearest_neighbours.py`` measures both
+    kinds); the answer does not depend on the choice (up to exact ties, which the scan gives to the
+    lowest index).
 
     Raises
     ------
@@ -31,11 +37,21 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, method: str = "tree") 
         raise HamsaError(f"need (q, d) and (p, d) arrays with the same d, got {queries.shape} and {points.shape}")
     if len(points) == 0:
         raise HamsaError("there are no points to search")
+    if method not in ("tree", "scan", "auto"):
+        raise HamsaError(f"method must be 'tree', 'scan' or 'auto', got {method!r}")
     if method == "scan":
         return scan_nearest_rows(queries, points)
-    if method != "tree":
-        raise HamsaError(f"method must be 'tree' or 'scan', got {method!r}")
-    return nearest_in(cKDTree(points), queries)
+    tree = cKDTree(points)
+    if method == "auto" and len(queries) >= 8 * _PROBE:
+        sample = queries[:: len(queries) // _PROBE][:_PROBE]
+        start = time.perf_counter()
+        tree.query(sample, workers=-1)
+        tree_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        scan_nearest_rows(sample, points)
+        if time.perf_counter() - start < tree_seconds:
+            return scan_nearest_rows(queries, points)
+    return nearest_in(tree, queries)
 
 
 def scan_nearest_rows(queries: np.ndarray, points: np.ndarray) -> np.ndarray:
