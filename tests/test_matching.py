@@ -418,6 +418,9 @@ def test_nearest_rows_equals_a_distance_scan(dimension, method):
         nearest_rows(queries, points[:, :-1] if dimension > 1 else points[:, None], method=method)
     with pytest.raises(HamsaError, match="no points"):
         nearest_rows(queries, points[:0], method=method)
+    queries[7, 1] = np.nan
+    with pytest.raises(HamsaError, match="queries contain NaN"):
+        nearest_rows(queries, points, method=method)
 
 
 def test_scan_is_exact_where_the_expansion_cancels_and_breaks_ties_by_index():

@@ -28,8 +28,8 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, method: str = "tree") 
     Raises
     ------
     HamsaError
-        If the arrays are not 2-D with the same number of columns, there are no points, or the method
-        is unknown.
+        If the arrays are not 2-D with the same number of columns, hold NaN or infinite values, there
+        are no points, or the method is unknown.
     """
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -37,6 +37,9 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, method: str = "tree") 
         raise HamsaError(f"need (q, d) and (p, d) arrays with the same d, got {queries.shape} and {points.shape}")
     if len(points) == 0:
         raise HamsaError("there are no points to search")
+    for name, array in (("queries", queries), ("points", points)):
+        if not np.all(np.isfinite(array)):
+            raise HamsaError(f"the {name} contain NaN or infinite values")
     if method not in ("tree", "scan", "auto"):
         raise HamsaError(f"method must be 'tree', 'scan' or 'auto', got {method!r}")
     if method == "scan":
