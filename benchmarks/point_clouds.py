@@ -5,7 +5,9 @@ scaled to unit area (as a mesh, reduced to its largest component as in Kim et al
 representations of the same shapes:
 
 * ``mesh``: the triangle meshes, cotan Laplacian (the reference);
-* ``cloud``: their vertices with the faces dropped (the point-cloud Laplacian of Sharp & Crane 2020);
+* ``cloud``: their vertices with the faces dropped (the point-cloud Laplacian of Sharp & Crane 2020, with
+  hamsa's local triangulations that keep nearly touching parts apart; ``--joined-sheets``: robust_laplacian's,
+  which joins them);
 * ``cloud 50%``: a seeded random half of each shape's vertices, drawn independently on source and target;
   the true image of a source point is the target point nearest (Euclidean) to its true vertex.
 
@@ -19,7 +21,7 @@ on clouds the Hamiltonian is at least as good as the LBO for every method, and w
 within 0.05) of the same method and basis on the mesh.
 
     OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--tosca-classes centaur horse] [--jobs 2]
-        [-o point_clouds.json]
+        [--methods hks] [--joined-sheets] [-o point_clouds.json]
 """
 
 from __future__ import annotations
@@ -43,9 +45,17 @@ REPRESENTATIONS = ("mesh", "cloud", "cloud 50%")
 
 
 def pair_scores(
-    dataset, source_name: str, target_name: str, k: int, points: int, methods=METHODS, orientation: float = 0.0
+    dataset,
+    source_name: str,
+    target_name: str,
+    k: int,
+    points: int,
+    methods=METHODS,
+    orientation: float = 0.0,
+    separate_sheets: bool = True,
 ) -> list[dict]:
-    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair."""
+    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair; ``separate_sheets``
+    as in :class:`hamsa.PointCloud`."""
     source, source_kept = dataset.load(source_name, largest_component=True)
     target, target_kept = dataset.load(target_name, largest_component=True)
     source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
@@ -54,13 +64,17 @@ def pair_scores(
     half_s = np.sort(rng.choice(source.n_vertices, source.n_vertices // 2, replace=False))
     half_t = np.sort(rng.choice(target.n_vertices, target.n_vertices // 2, replace=False))
     known = truth[half_s] >= 0
+
+    def cloud(points):
+        return hamsa.PointCloud(points, separate_sheets=separate_sheets)
+
     nearest = cKDTree(target.vertices[half_t]).query(target.vertices[np.where(known, truth[half_s], 0)])[1]
     shapes = {
         "mesh": (source, target, truth),
-        "cloud": (hamsa.PointCloud(source.vertices), hamsa.PointCloud(target.vertices), truth),
+        "cloud": (cloud(source.vertices), cloud(target.vertices), truth),
         "cloud 50%": (
-            hamsa.PointCloud(source.vertices[half_s]),
-            hamsa.PointCloud(target.vertices[half_t]),
+            cloud(source.vertices[half_s]),
+            cloud(target.vertices[half_t]),
             np.where(known, nearest, -1),
         ),
     }
@@ -122,6 +136,11 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--orientation", type=float, default=0.0, help="orientation-term weight of fmap's start map (default 0)"
     )
+    parser.add_argument(
+        "--joined-sheets",
+        action="store_true",
+        help="clouds with robust_laplacian's point-cloud Laplacian (PointCloud(separate_sheets=False))",
+    )
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
@@ -138,7 +157,7 @@ def main(argv=None) -> int:
 
     start = time.perf_counter()
     results = Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
-        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation)
+        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation, not args.joined_sheets)
         for dataset, s, t in work
     )
     rows = []

@@ -1,20 +1,26 @@
 """Point clouds: the validated :class:`PointCloud` value object and its Laplacian (Sharp & Crane 2020).
 
 A point cloud is an (n, 3) array of points sampling a surface, with no faces. Its operators are the
-point-cloud Laplacian of Sharp & Crane, "A Laplacian for Nonmanifold Triangle Meshes" (SGP 2020), sec. 5
-(robust_laplacian's ``point_cloud_laplacian``): each point's ``neighbors`` nearest points are projected
-on its tangent plane and Delaunay-triangulated there; the union of these local triangulations is a
-non-manifold triangle set whose tufted intrinsic Delaunay cotan Laplacian (each triangle weighted 1/3) is
-``W`` and whose lumped mass is ``A``. ``W`` is symmetric positive semidefinite with ``W @ 1 = 0`` (hamsa's
-sign convention) and ``A.sum()`` estimates the sampled surface's area, so everything in hamsa that needs
-only (W, A) -- eigenbases of ``W + A diag(V)``, heat kernels, HKS / WKS, functional maps, ICSKM -- runs on a
-cloud unchanged. Geodesic distances on a cloud come from potpourri3d's point-cloud heat method
-(:class:`hamsa.geodesic.PointCloudGeodesicSolver`). Needs the ``[pointcloud]`` extra.
+point-cloud Laplacian of Sharp & Crane, "A Laplacian for Nonmanifold Triangle Meshes" (SGP 2020), sec. 5:
+each point's ``neighbors`` nearest points are projected on its tangent plane and Delaunay-triangulated
+there; the union of these local triangulations is a non-manifold triangle set whose tufted intrinsic
+Delaunay cotan Laplacian (each triangle weighted 1/3) is ``W`` and whose lumped mass is ``A``. ``W`` is
+symmetric positive semidefinite with ``W @ 1 = 0`` (hamsa's sign convention) and ``A.sum()`` estimates the
+sampled surface's area, so everything in hamsa that needs only (W, A) -- eigenbases of ``W + A diag(V)``,
+heat kernels, HKS / WKS, functional maps, ICSKM -- runs on a cloud unchanged. Geodesic distances on a cloud
+come from potpourri3d's point-cloud heat method (:class:`hamsa.geodesic.PointCloudGeodesicSolver`). Needs
+the ``[pointcloud]`` extra.
 
-Limitation: points know no connectivity, so parts of a shape that nearly touch (fingers of a hand, an arm
-against the body) closer than about the neighbourhood's radius are joined by the Laplacian ("short
-circuits"): the low eigenvalues of the built-in ``shapes.hand()`` as a cloud stay ~11% off the mesh's at any
-sampling density, while those of ``shapes.humanoid()`` converge. Use the mesh when there is one.
+Points know no connectivity, so parts of a shape that nearly touch (fingers of a hand, an arm against the
+body) closer than about the neighbourhood's radius would be joined by the local triangulations ("short
+circuits"), as they are in robust_laplacian's ``point_cloud_laplacian``. hamsa's own local triangulations
+(:attr:`PointCloud.local_triangles`) leave out the neighbours whose outward normal points away from the
+point's: the facing sides of two nearly touching parts. On SCAPE's mesh001, whose arms nearly touch the
+body, that brings the cloud's third eigenvalue from 12.1 back to 10.8 (the mesh's: 10.8), and on the
+built-in ``shapes.hand("curled")`` the ten lowest from up to 64% off the mesh's to within 5%.
+``separate_sheets=False`` gives robust_laplacian's operator. The rule never splits the cloud into pieces,
+so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts)
+short circuits stay; use the mesh when there is one.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from hamsa.mesh import TriMesh, as_coordinates, as_trimesh, check_coordinates, f
 DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
 # nearest points of the least-squares gradient and of the normals' orientation graph
 GRADIENT_NEIGHBORS = 10
+_REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
 
 
 class PointCloud:
@@ -45,6 +52,10 @@ class PointCloud:
         Nearest neighbours of each point in its local tangent-plane triangulation; n must exceed it.
     mollify : float
         Intrinsic mollification of near-degenerate local triangles, as a fraction of the mean edge length.
+    separate_sheets : bool
+        Leave the neighbours on another sheet (outward normals pointing apart) out of each point's local
+        triangulation (:attr:`local_triangles`); False: robust_laplacian's ``point_cloud_laplacian`` over
+        all ``neighbors`` nearest points.
 
     Raises
     ------
@@ -62,7 +73,9 @@ class PointCloud:
     [2.0, 2.0, 2.0]
     """
 
-    def __init__(self, points, *, neighbors: int = DEFAULT_NEIGHBORS, mollify: float = 1e-5):
+    def __init__(
+        self, points, *, neighbors: int = DEFAULT_NEIGHBORS, mollify: float = 1e-5, separate_sheets: bool = True
+    ):
         points = as_coordinates(points, "points")
         check_coordinates(points, "points")
         if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
@@ -86,6 +99,7 @@ class PointCloud:
         self._spacing = distance[:, 1]
         self.neighbors = int(neighbors)
         self.mollify = float(mollify)
+        self.separate_sheets = bool(separate_sheets)
 
     @property
     def vertices(self) -> np.ndarray:
@@ -102,21 +116,71 @@ class PointCloud:
         return self._points.shape[0]
 
     def __repr__(self) -> str:
-        return f"PointCloud(n_points={self.n_vertices}, neighbors={self.neighbors})"
+        return (
+            f"PointCloud(n_points={self.n_vertices}, neighbors={self.neighbors}, "
+            f"separate_sheets={self.separate_sheets})"
+        )
 
     @cached_property
     def operators(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """``(W, A)``: the point-cloud stiffness (PSD, ``W @ 1 = 0``) and lumped mass, both (n, n) csr."""
+        """``(W, A)``: the point-cloud stiffness (PSD, ``W @ 1 = 0``) and lumped mass, both (n, n) csr.
+
+        With ``separate_sheets`` the local triangulations are hamsa's own (:attr:`local_triangles`: each
+        point's Delaunay star among the neighbours on its own sheet) and robust_laplacian builds the tufted
+        intrinsic Delaunay operators of their union, each triangle weighted 1/3 as in Sharp & Crane;
+        without, it is robust_laplacian's ``point_cloud_laplacian`` (all ``neighbors`` nearest points)."""
         try:
             import robust_laplacian
         except ImportError:
             raise MissingDependencyError(
                 "the point-cloud Laplacian needs robust_laplacian: pip install 'hamsa[pointcloud]'"
             ) from None
-        W, A = robust_laplacian.point_cloud_laplacian(
-            self._points, mollify_factor=self.mollify, n_neighbors=self.neighbors
-        )
-        return sp.csr_matrix(W), sp.csr_matrix(A)
+        if not self.separate_sheets:
+            W, A = robust_laplacian.point_cloud_laplacian(
+                self._points, mollify_factor=self.mollify, n_neighbors=self.neighbors
+            )
+            return sp.csr_matrix(W), sp.csr_matrix(A)
+        W, A = robust_laplacian.mesh_laplacian(self._points, self.local_triangles, mollify_factor=self.mollify)
+        return sp.csr_matrix(W) / 3.0, sp.csr_matrix(A) / 3.0
+
+    @cached_property
+    def local_triangles(self) -> np.ndarray:
+        """(f, 3) point ids: every point's Delaunay star among its ``neighbors`` nearest points on the same
+        sheet, projected on its tangent plane (Sharp & Crane 2020, sec. 5); a triangle appears once per
+        point whose star holds it (up to three times).
+
+        A neighbour q of p is on another sheet when their outward normals (:attr:`normals`) point apart,
+        ``n_p . n_q <= 0``: where two parts of a surface nearly touch (an arm against the body) their
+        facing sides have opposite outward normals, and so do the two sides of a part thinner than the
+        neighbourhood; joining them would short-circuit the Laplacian. A wrongly oriented normal must not
+        cut the surface itself, hence two safeguards: a point with fewer than two neighbours on its sheet
+        keeps all of them, and a neighbour that the rule leaves in another piece of the triangulation (a
+        patch of flipped normals, cut off along its rim) is given back, with the stars rebuilt, for up to
+        :data:`_REJOIN_ROUNDS` rounds. Read-only."""
+        n, neighbours = self.n_vertices, self._neighbourhoods[1][:, 1:]
+        same_sheet = np.einsum("nc,nkc->nk", self.normals, self.normals[neighbours]) > 0
+        same_sheet[same_sheet.sum(axis=1) < 2] = True
+        faces = self._stars(np.arange(n), neighbours, same_sheet)
+        for _ in range(_REJOIN_ROUNDS):
+            edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
+            graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
+            pieces = connected_components(graph, directed=False)[1]
+            bridges = pieces[:, None] != pieces[neighbours]  # neighbours the rule left in another piece
+            if not bridges.any():
+                break
+            same_sheet |= bridges
+            centers = np.flatnonzero(bridges.any(axis=1))
+            rebuilt = self._stars(centers, neighbours, same_sheet)
+            faces = np.vstack([faces[~np.isin(faces[:, 0], centers)], rebuilt])
+        faces.flags.writeable = False
+        return faces
+
+    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray) -> np.ndarray:
+        """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks."""
+        return np.vstack([
+            _delaunay_stars(self._points, self.normals, ids[rows], neighbours[ids[rows]], kept[ids[rows]])
+            for rows in _chunks(len(ids), 8 * neighbours.shape[1])
+        ])  # fmt: skip
 
     @cached_property
     def area(self) -> float:
@@ -151,28 +215,35 @@ class PointCloud:
     def normals(self) -> np.ndarray:
         """(n, 3) unit normals, consistently oriented and pointing outward (read-only).
 
-        Each is the direction of least variance of the point's ``neighbors`` nearest points (PCA). Signs are
+        Each is the direction of least variance of the point and its ``neighbors // 2`` nearest points (at
+        least :data:`GRADIENT_NEIGHBORS`; PCA): half the triangulation's neighbourhood, wide enough to
+        average out sampling noise and narrow enough not to reach across sheets that nearly touch. Signs are
         made consistent along a minimum spanning tree of the graph of each point's
-        :data:`GRADIENT_NEIGHBORS` nearest points, weighted by ``(1 - |n_i . n_j| + 1e-3) x distance``, so
-        that the sign travels across nearly parallel normals first (Hoppe et al. 1992); then each piece of
-        that graph is flipped so that ``sum n . (p - centroid) > 0`` (3 x the enclosed volume, by the
-        divergence theorem: outward on a closed piece). Where sheets nearly touch or a part is thinner than
-        the neighbourhood, a few points can get the wrong sign (about 1% on SCAPE's bodies)."""
+        :data:`GRADIENT_NEIGHBORS` nearest points (Hoppe et al. 1992), weighted by
+        ``(1 - |t_ij| + 1e-3) x distance`` where t_ij compares n_j with n_i carried to point j along the
+        circle through both points (König & Gumhold 2009; :func:`_transported_agreement`): the sign
+        travels where that comparison is clearest first, and it crosses the gap between two nearly
+        touching parts, or a thin part, reversed (facing sides point apart) instead of copied. Then each
+        piece of that graph is flipped so that ``sum n . (p - centroid) > 0`` (3 x the enclosed volume, by
+        the divergence theorem: outward on a closed piece). Where parts are thinner than the point spacing
+        some points can still get the wrong sign (about 1% on SCAPE's bodies, 1-13% on TOSCA's shapes,
+        mostly in patches on legs, tails and ears)."""
         distances, indices = self._neighbourhoods
         n = self.n_vertices
+        fitted = 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)  # the point and its nearest ones
         normals = np.empty((n, 3))
         for rows in _chunks(n, indices.shape[1] * 3):  # (chunk, neighbors + 1, 3) at a time: bounded memory
-            neighbourhood = self._points[indices[rows]]
+            neighbourhood = self._points[indices[rows, :fitted]]
             spread = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
             normals[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
         rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
         columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
-        alignment = np.abs(np.einsum("ij,ij->i", normals[rows], normals[columns]))
+        alignment = np.abs(_transported_agreement(self._points, normals, rows, columns))
         weights = (1.0 - alignment + 1e-3) * distances[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
         graph = sp.csr_matrix((weights, (rows, columns)), shape=(n, n))
         tree = minimum_spanning_tree(graph.maximum(graph.T))
         count, labels = connected_components(tree, directed=False)
-        normals[_flips_along_forest(tree, normals, labels, count)] *= -1
+        normals[_flips_along_forest(tree, self._points, normals, labels, count)] *= -1
         pieces = np.bincount(labels, minlength=count)[:, None]
         centroids = np.stack([np.bincount(labels, self._points[:, d], count) for d in range(3)], axis=1) / pieces
         volumes = np.bincount(labels, np.einsum("ij,ij->i", normals, self._points - centroids[labels]), count)
@@ -216,7 +287,7 @@ class PointCloud:
     def scaled_to_unit_area(self) -> PointCloud:
         """This cloud centered at its mean and scaled so that :attr:`area` is 1 (same neighbourhoods)."""
         centered = (self._points - self._points.mean(axis=0)) / np.sqrt(self.area)
-        return PointCloud(centered, neighbors=self.neighbors, mollify=self.mollify)
+        return self._with_points(centered)
 
     def subset(self, indices) -> PointCloud:
         """The cloud of the points ``indices`` (in that order): e.g. a random subsample."""
@@ -225,10 +296,28 @@ class PointCloud:
             raise MeshError(f"indices must be a 1-D integer array, got shape {indices.shape} {indices.dtype}")
         if indices.size and (indices.min() < 0 or indices.max() >= self.n_vertices):
             raise MeshError(f"indices must be in [0, {self.n_vertices})")
-        return PointCloud(self._points[indices], neighbors=self.neighbors, mollify=self.mollify)
+        return self._with_points(self._points[indices])
+
+    def _with_points(self, points) -> PointCloud:
+        return PointCloud(points, neighbors=self.neighbors, mollify=self.mollify, separate_sheets=self.separate_sheets)
 
 
-def _flips_along_forest(tree: sp.spmatrix, normals: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+def _transported_agreement(points, normals, rows, columns) -> np.ndarray:
+    """``n_q . (I - 2 e e^T) n_p`` for the point pairs (p, q) = (rows, columns), e = (q - p) / |q - p|: the
+    normal at p carried to q along the circle through p and q that it is normal to (König & Gumhold 2009),
+    against q's own. Positive when the two are oriented alike: for two points of one sheet (e nearly
+    tangent) it is ``n_q . n_p``, and for two facing points of parts that nearly touch, or the two sides of
+    a thin part (e along the normals), it is ``-n_q . n_p``, so a sign never travels across such a gap
+    reversed."""
+    e = points[columns] - points[rows]
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    p, q = normals[rows], normals[columns]
+    return np.einsum("ij,ij->i", q, p) - 2 * np.einsum("ij,ij->i", p, e) * np.einsum("ij,ij->i", q, e)
+
+
+def _flips_along_forest(
+    tree: sp.spmatrix, points: np.ndarray, normals: np.ndarray, labels: np.ndarray, count: int
+) -> np.ndarray:
     """(n,) bool: which normals to flip so that each agrees in sign with its parent in the spanning forest
     ``tree`` (pieces ``labels``, each rooted at its first point). A point is flipped when an odd number of
     the tree edges on its path to the root join normals of opposite sign: one breadth-first search from a
@@ -241,12 +330,54 @@ def _flips_along_forest(tree: sp.spmatrix, normals: np.ndarray, labels: np.ndarr
     _, parent = breadth_first_order(forest, n, directed=False, return_predecessors=True)
     parent[n] = n
     odd = np.zeros(n + 1, dtype=bool)
-    odd[:n] = np.einsum("ij,ij->i", normals, normals[np.minimum(parent[:n], n - 1)]) < 0
+    odd[:n] = _transported_agreement(points, normals, np.minimum(parent[:n], n - 1), np.arange(n)) < 0
     odd[roots] = False  # a root's parent is the virtual root
     while np.any(parent != n):
         odd ^= odd[parent]
         parent = parent[parent]
     return odd[:n]
+
+
+def _delaunay_stars(points, normals, rows, neighbours, kept) -> np.ndarray:
+    """(f, 3) triangles (p, a, b): the Delaunay star of each point p of ``rows`` among its ``kept``
+    neighbours (both (r, m)), projected on its tangent plane (normal ``normals[p]``).
+
+    Under the inversion w = u / |u|^2 of the tangent coordinates u about p, the circles through p become
+    lines and their insides the half-planes away from p, so (p, a, b) is a Delaunay triangle (its
+    circumcircle empty) exactly when w_a w_b is an edge of the convex hull of the w with p on its inner
+    side. The hulls are found by gift wrapping, vectorized over the points: at most m steps."""
+    r, m = neighbours.shape
+    normal = normals[rows]
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    first = np.cross(normal, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    frame = np.stack([first, np.cross(normal, first)], axis=1)  # (r, 2, 3) tangent axes
+    u = np.einsum("nkc,nac->nka", points[neighbours] - points[rows, None, :], frame)
+    squared = np.einsum("nka,nka->nk", u, u)
+    kept = kept & (squared > 0)
+    w = u / np.where(squared > 0, squared, 1.0)[:, :, None]
+    local = np.arange(r)
+    start = np.argmax(np.where(kept, 1.0 / np.where(squared > 0, squared, 1.0), -1.0), axis=1)  # the largest |w|
+    current = start
+    direction = np.stack([-w[local, start, 1], w[local, start, 0]], axis=1)  # the hull runs counterclockwise
+    active = kept.sum(axis=1) >= 2
+    faces = []
+    for _ in range(m):
+        step = w - w[local, current][:, None, :]
+        turn = np.arctan2(direction[:, None, 0] * step[:, :, 1] - direction[:, None, 1] * step[:, :, 0],
+                          np.einsum("na,nka->nk", direction, step))  # fmt: skip
+        turn = np.where(kept & (np.einsum("nka,nka->nk", step, step) > 0), np.mod(turn, 2 * np.pi), np.inf)
+        following = np.argmin(turn, axis=1)
+        edge = w[local, following] - w[local, current]
+        inner = edge[:, 1] * w[local, current, 0] - edge[:, 0] * w[local, current, 1] > 0  # p left of the edge
+        take = active & inner & np.isfinite(turn[local, following])
+        faces.append(np.stack([rows[take], neighbours[take, current[take]], neighbours[take, following[take]]], axis=1))
+        direction = edge
+        current = np.where(active, following, current)
+        active = active & (following != start)
+        if not active.any():
+            break
+    return np.vstack(faces)
 
 
 def _chunks(n: int, values_per_row: int, budget: int = 2**23):
