@@ -61,18 +61,22 @@ def test_nearly_touching_parts_are_not_joined_when_sheets_are_separated():
     assert np.max(np.abs(joined / on_mesh - 1)) > 0.3  # robust_laplacian's short circuits: measured 0.64
 
 
-def test_flipped_normals_do_not_cut_the_surface():
+def test_flipped_normals_do_not_cut_the_surface(monkeypatch):
+    import hamsa.pointcloud as pointcloud
+
     points = hamsa.shapes.sphere(3000).vertices
     reference = hamsa.eigenbasis(hamsa.PointCloud(points), len(SPHERE)).values
-    cloud = hamsa.PointCloud(points)
     normals = points.copy()  # outward; then a cap whose orientation failed, and one lone flipped point
     normals[points[:, 2] > 0.6] *= -1
     normals[0] *= -1
-    cloud.__dict__["normals"] = normals
-    assert cloud.n_components == 1  # the cap, cut off along its rim, is joined back
-    flipped = hamsa.eigenbasis(cloud, len(SPHERE)).values
-    np.testing.assert_allclose(flipped[1:], reference[1:], rtol=0.003)  # no slit along the rim
-    np.testing.assert_allclose(flipped[1:], SPHERE[1:], rtol=0.01)
+    for rounds in (4, 0):  # the cap, cut off along its rim, is joined back; with no round, nothing is cut
+        monkeypatch.setattr(pointcloud, "_REJOIN_ROUNDS", rounds)
+        cloud = hamsa.PointCloud(points)
+        cloud.__dict__["normals"] = normals
+        assert cloud.n_components == 1
+        flipped = hamsa.eigenbasis(cloud, len(SPHERE)).values
+        np.testing.assert_allclose(flipped[1:], reference[1:], rtol=0.003)  # no slit along the rim
+        np.testing.assert_allclose(flipped[1:], SPHERE[1:], rtol=0.01)
 
 
 @pytest.fixture(scope="module")

@@ -156,17 +156,21 @@ class PointCloud:
         cut the surface itself, hence two safeguards: a point with fewer than two neighbours on its sheet
         keeps all of them, and a neighbour that the rule leaves in another piece of the triangulation (a
         patch of flipped normals, cut off along its rim) is given back, with the stars rebuilt, for up to
-        :data:`_REJOIN_ROUNDS` rounds. Read-only."""
+        :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join are still apart after them,
+        every point keeps all its neighbours. Read-only."""
         n, neighbours = self.n_vertices, self._neighbourhoods[1][:, 1:]
         same_sheet = np.einsum("nc,nkc->nk", self.normals, self.normals[neighbours]) > 0
         same_sheet[same_sheet.sum(axis=1) < 2] = True
         faces = self._stars(np.arange(n), neighbours, same_sheet)
-        for _ in range(_REJOIN_ROUNDS):
+        for attempt in range(_REJOIN_ROUNDS + 1):
             edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
             graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
             pieces = connected_components(graph, directed=False)[1]
             bridges = pieces[:, None] != pieces[neighbours]  # neighbours the rule left in another piece
             if not bridges.any():
+                break
+            if attempt == _REJOIN_ROUNDS:  # still apart: no sheets are separated anywhere
+                faces = self._stars(np.arange(n), neighbours, np.ones_like(same_sheet))
                 break
             same_sheet |= bridges
             centers = np.flatnonzero(bridges.any(axis=1))
