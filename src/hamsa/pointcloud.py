@@ -15,9 +15,8 @@ Points know no connectivity, so parts of a shape that nearly touch (fingers of a
 body) closer than about the neighbourhood's radius would be joined by the local triangulations ("short
 circuits"), as they are in robust_laplacian's ``point_cloud_laplacian``. hamsa's own local triangulations
 (:attr:`PointCloud.local_triangles`) leave out the neighbours whose outward normal points away from the
-point's: the facing sides of two nearly touching parts. On SCAPE's mesh001, whose arms nearly touch the
-body, that brings the cloud's third eigenvalue from 12.1 back to 10.8 (the mesh's: 10.8), and on the
-built-in ``shapes.hand("curled")`` the ten lowest from up to 64% off the mesh's to within 5%.
+point's: the facing sides of two nearly touching parts (the built-in ``shapes.hand("curled")`` as a cloud
+then has the mesh's low spectrum, which robust_laplacian's operator misses; see docs/results/point_clouds.md).
 ``separate_sheets=False`` gives robust_laplacian's operator. The rule never splits the cloud into pieces,
 so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts)
 short circuits stay; use the mesh when there is one.
@@ -230,8 +229,8 @@ class PointCloud:
         touching parts, or a thin part, reversed (facing sides point apart) instead of copied. Then each
         piece of that graph is flipped so that ``sum n . (p - centroid) > 0`` (3 x the enclosed volume, by
         the divergence theorem: outward on a closed piece). Where parts are thinner than the point spacing
-        some points can still get the wrong sign (about 1% on SCAPE's bodies, 1-13% on TOSCA's shapes,
-        mostly in patches on legs, tails and ears)."""
+        or touch over a wide area some points can still get the wrong sign, mostly in patches on legs,
+        tails, ears and at the contacts."""
         distances, indices = self._neighbourhoods
         n = self.n_vertices
         fitted = 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)  # the point and its nearest ones
