@@ -266,10 +266,7 @@ class PointCloud:
         weights = np.empty((n, 3, GRADIENT_NEIGHBORS))  # gradient at p = sum_k w_k (f_k - f_p)
         for chunk in _chunks(n, 16 * GRADIENT_NEIGHBORS):  # the fit's (chunk, K, 5) arrays: bounded memory
             normal = normals[chunk]
-            helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-            first = np.cross(normal, helper)
-            first /= np.linalg.norm(first, axis=1, keepdims=True)
-            frame = np.stack([first, np.cross(normal, first)], axis=1)  # (chunk, 2, 3) tangent axes
+            frame = _tangent_frames(normal)
             offsets = self._points[neighbours[chunk]] - self._points[chunk, None, :]  # (chunk, K, 3)
             u, v = np.einsum("nkc,nac->ank", offsets, frame)  # (chunk, K) tangent coordinates
             fit = np.linalg.pinv(np.stack([u, v, u * u, u * v, v * v], axis=2))[:, :2]  # (chunk, 2, K)
@@ -303,6 +300,14 @@ class PointCloud:
 
     def _with_points(self, points) -> PointCloud:
         return PointCloud(points, neighbors=self.neighbors, mollify=self.mollify, separate_sheets=self.separate_sheets)
+
+
+def _tangent_frames(normals: np.ndarray) -> np.ndarray:
+    """(r, 2, 3): two orthonormal tangent axes perpendicular to each unit normal (r, 3)."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    first = np.cross(normals, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    return np.stack([first, np.cross(normals, first)], axis=1)
 
 
 def _transported_agreement(points, normals, rows, columns) -> np.ndarray:
@@ -351,10 +356,7 @@ def _delaunay_stars(points, normals, rows, neighbours, kept) -> np.ndarray:
     side. The hulls are found by gift wrapping, vectorized over the points: at most m steps."""
     r, m = neighbours.shape
     normal = normals[rows]
-    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    first = np.cross(normal, helper)
-    first /= np.linalg.norm(first, axis=1, keepdims=True)
-    frame = np.stack([first, np.cross(normal, first)], axis=1)  # (r, 2, 3) tangent axes
+    frame = _tangent_frames(normal)
     u = np.einsum("nkc,nac->nka", points[neighbours] - points[rows, None, :], frame)
     squared = np.einsum("nka,nka->nk", u, u)
     kept = kept & (squared > 0)
