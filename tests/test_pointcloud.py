@@ -62,6 +62,21 @@ def test_nearly_touching_parts_are_not_joined_when_sheets_are_separated():
     assert np.max(np.abs(joined / on_mesh - 1)) > 0.3  # robust_laplacian's short circuits: measured 0.64
 
 
+def test_the_neighbours_left_out_are_the_facing_sides_of_nearly_touching_parts():
+    mesh = hamsa.shapes.hand("curled")
+    cloud = hamsa.PointCloud(mesh.vertices)
+    points, slots = np.nonzero(~cloud._sheet_triangulation[1])
+    partners = cloud._neighbourhoods[1][:, 1:][points, slots]
+    assert cloud.separated_neighbours == len(points) > 1000  # measured 2638 of 6862 x 30
+    facing = np.einsum("ij,ij->i", mesh.vertex_normals[points], mesh.vertex_normals[partners]) < 0
+    assert facing.mean() > 0.8  # measured 0.86 (the others: the contacts' edges)
+    stars = cloud.local_triangles  # (centre, a, b): no star holds a neighbour left out of it
+    in_stars = np.concatenate([stars[:, 0] * mesh.n_vertices + stars[:, j] for j in (1, 2)])
+    assert not np.isin(points * mesh.n_vertices + partners, in_stars).any()
+    assert hamsa.PointCloud(mesh.vertices, separate_sheets=False).separated_neighbours == 0
+    assert hamsa.PointCloud(hamsa.shapes.sphere(800).vertices).separated_neighbours == 0
+
+
 def test_flipped_normals_do_not_cut_the_surface(monkeypatch):
     import hamsa.pointcloud as pointcloud
 
@@ -233,6 +248,18 @@ def test_command_line_takes_point_files_non_manifold_meshes_and_dirichlet_vertic
     assert np.all(held.vectors[:5] == 0)
     # three pages, each a square clamped on one side: pi^2 / 4 three times
     np.testing.assert_allclose(held.values, np.pi**2 / 4, rtol=0.03)
+
+    hand = hamsa.shapes.hand("curled").vertices
+    np.savetxt(tmp_path / "hand.xyz", hand)
+    assert main(["info", str(tmp_path / "hand.xyz"), "--neighbors", "20"]) == 0
+    left_out = hamsa.PointCloud(hand, neighbors=20).separated_neighbours
+    assert f"sheets          {left_out} of {20 * len(hand)} neighbour pairs left out" in capsys.readouterr().out
+    args = ["basis", str(tmp_path / "hand.xyz"), "-k", "5", "--joined-sheets", "-q", "-o", str(tmp_path / "h.npz")]
+    assert main(args) == 0
+    joined = hamsa.eigenbasis(hamsa.PointCloud(hand, separate_sheets=False), 5).values
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(tmp_path / "h.npz").values, joined)
+    assert main(["info", str(tmp_path / "book.off"), "--joined-sheets"]) == 2
+    assert "--joined-sheets: for point clouds" in capsys.readouterr().err
 
     np.savetxt(tmp_path / "posed.xyz", sphere.vertices @ np.diag([1.0, 1.0, 1.2]))
     out = tmp_path / "map.npy"

@@ -86,13 +86,51 @@ class _Loaded(NamedTuple):
     input_vertices: int
 
 
-def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -> _Loaded:
+def _add_cloud_options(command) -> None:
+    """How the operators of a point file are built (``PointCloud(neighbors=, separate_sheets=)``)."""
+    from hamsa.pointcloud import DEFAULT_NEIGHBORS
+
+    group = command.add_argument_group("point clouds")
+    group.add_argument(
+        "--neighbors",
+        type=_positive_int,
+        help=f"nearest points in each point's local triangulation (default {DEFAULT_NEIGHBORS}; at least 3)",
+    )
+    group.add_argument(
+        "--joined-sheets",
+        action="store_true",
+        help="also join the neighbours on the facing sides of nearly touching parts (robust_laplacian's operator; "
+        "by default they are left out where the estimated outward normals point apart): for clouds whose normals "
+        "cannot be oriented, such as open scans; hamsa info counts the pairs left out",
+    )
+
+
+def _cloud_options(args) -> dict:
+    """The PointCloud keywords of ``args`` (of :func:`_add_cloud_options`)."""
+    from hamsa.pointcloud import DEFAULT_NEIGHBORS
+
+    return {"neighbors": args.neighbors or DEFAULT_NEIGHBORS, "separate_sheets": not args.joined_sheets}
+
+
+def _check_cloud_options(args, *shapes) -> None:
+    """Refuses --neighbors / --joined-sheets when none of the loaded shapes is a point cloud."""
+    from hamsa.pointcloud import PointCloud
+
+    given = [
+        name for name, value in (("--neighbors", args.neighbors), ("--joined-sheets", args.joined_sheets)) if value
+    ]
+    if given and not any(isinstance(shape, PointCloud) for shape in shapes):
+        raise HamsaError(f"{' and '.join(given)}: for point clouds, and no input here is one")
+
+
+def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, cloud: dict | None = None) -> _Loaded:
     """The mesh (or point cloud) of ``path`` for every command, by one policy. Refused (a MeshError naming the
     CLI option that fixes it) when the numbers would be wrong: unreferenced vertices (no area, so a singular
     mass matrix) and edges shared by more than two faces (the cotan Laplacian is undefined there; ``--laplacian
     tufted`` takes them). Accepted with a warning on stderr when it is only unusual: non-manifold vertices,
     faces not consistently oriented (the spectrum does not depend on it; normals do) and several pieces
-    (each has its own spectrum). A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud."""
+    (each has its own spectrum). A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud, built
+    with the keywords ``cloud`` (:func:`_cloud_options`)."""
     from hamsa.io import POINTS_ONLY, load_shape, point_format
     from hamsa.pointcloud import PointCloud
 
@@ -109,7 +147,7 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None) -
         print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
         return _Loaded(mesh, kept, len(vertices))
     tufted = laplacian == "tufted"
-    mesh = load_shape(path, manifold=not tufted)
+    mesh = load_shape(path, manifold=not tufted, **(cloud or {}))
     if isinstance(mesh, PointCloud):
         return _Loaded(mesh, None, mesh.n_vertices)
     if len(mesh.unreferenced_vertices):
@@ -156,6 +194,7 @@ def _parser() -> argparse.ArgumentParser:
 
     info = commands.add_parser("info", help="describe a mesh: size, area, components, boundaries, defects")
     info.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
+    _add_cloud_options(info)
 
     basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
     basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
@@ -183,6 +222,7 @@ def _parser() -> argparse.ArgumentParser:
         "--device", choices=("cpu", "cuda"), default="cpu", help="cuda: solve on an NVIDIA GPU (CuPy; [gpu-cuda12])"
     )
     basis.add_argument("-o", "--output", required=True, help="output .npz (see hamsa.Eigenbasis.load)")
+    _add_cloud_options(basis)
 
     optimize = commands.add_parser(
         "optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)"
@@ -303,6 +343,7 @@ def _parser() -> argparse.ArgumentParser:
         help="eigenpairs of each shape (default 100, as benchmark-matching and the paper; fmap needs >= 20, wks >= 60)",
     )
     match.add_argument("-o", "--output", required=True, help="output .npy: for each source vertex, a target vertex")
+    _add_cloud_options(match)
 
     bench = commands.add_parser(
         "benchmark-matching", help="every evaluation pair of a dataset, LBO vs Hamiltonian, Kim et al. table"
@@ -386,6 +427,7 @@ def _parser() -> argparse.ArgumentParser:
         "--constant", action="store_true", help="also show a constant first eigenfunction (skipped by default)"
     )
     view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
+    _add_cloud_options(view)
 
     reproduce = commands.add_parser(
         "reproduce", help="run every experiment of the paper and write report/index.html + results.json"
@@ -502,7 +544,8 @@ def _info(args) -> None:
     from hamsa.io import load_shape
     from hamsa.pointcloud import PointCloud
 
-    mesh = load_shape(args.mesh, manifold=False)
+    mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
+    _check_cloud_options(args, mesh)
     if isinstance(mesh, PointCloud):
         cloud = mesh
         print(f"point cloud     {args.mesh}")
@@ -511,6 +554,14 @@ def _info(args) -> None:
         print(f"bounding box    diagonal {cloud.bounding_box_diagonal:.6g}")
         print(f"mean spacing    {cloud.mean_spacing:.6g}")
         print(f"components      {cloud.n_components}")
+        if cloud.separate_sheets:
+            pairs = cloud.n_vertices * cloud.neighbors
+            print(
+                f"sheets          {cloud.separated_neighbours} of {pairs} neighbour pairs left out (facing sides of "
+                "nearly touching parts; --joined-sheets keeps them)"
+            )
+        else:
+            print("sheets          joined (every point's star over all its nearest points)")
         return
     loops = mesh.boundary_loops
     print(f"mesh            {args.mesh}")
@@ -552,7 +603,8 @@ def _basis(args) -> None:
     start = time.perf_counter()
     with _Steps(args, 3) as step:
         step(f"reading {Path(args.mesh).name}")
-        given = _load_for_operators(args.mesh, args.repair, args.laplacian)
+        given = _load_for_operators(args.mesh, args.repair, args.laplacian, _cloud_options(args))
+        _check_cloud_options(args, given.mesh)
         mesh, vertex_ids = given.mesh, given.vertex_ids
         loaded = time.perf_counter()
         potential = _potential(args.potential, given)
@@ -727,7 +779,10 @@ def _match(args) -> None:
         print(f"-k {args.k} is too few for {args.method}: using k = {k}", file=sys.stderr)
     with _Steps(args, 7) as step:
         step("reading the meshes")
-        loaded = [_load_for_operators(path, args.repair) for path in (args.source, args.target)]
+        loaded = [
+            _load_for_operators(path, args.repair, cloud=_cloud_options(args)) for path in (args.source, args.target)
+        ]
+        _check_cloud_options(args, *(item.mesh for item in loaded))
         truth = _truth(args.truth, *loaded) if args.truth else None
         meshes = [item.mesh.scaled_to_unit_area() for item in loaded]  # comparable spectra
         wanted = args.method == "icskm" or args.landmarks  # (icskm needs them, fmap takes them)
@@ -942,9 +997,10 @@ def _view(args) -> None:
         raise HamsaError(
             "--potential is for the eigenfunctions view computed here (not with --basis/--field/--modes/--map)"
         )
-    shape = _load_for_operators(args.mesh, args.repair)
+    shape = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
+    _check_cloud_options(args, shape.mesh)
     if args.map:
-        target = _load_for_operators(args.target, args.repair)
+        target = _load_for_operators(args.target, args.repair, cloud=_cloud_options(args))
         mapping = _load_ids(args.map)
         if shape.vertex_ids is not None or target.vertex_ids is not None:
             raise HamsaError("--map shows a map between the meshes as given: leave out --repair")

@@ -157,6 +157,21 @@ class PointCloud:
         patch of flipped normals, cut off along its rim) is given back, with the stars rebuilt, for up to
         :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join are still apart after them,
         every point keeps all its neighbours. Read-only."""
+        return self._sheet_triangulation[0]
+
+    @property
+    def separated_neighbours(self) -> int:
+        """How many (point, neighbour) pairs of the ``neighbors`` nearest the sheet rule of
+        :attr:`local_triangles` leaves out of the point's star (0 without ``separate_sheets``): a measure of
+        how much of the cloud lies across a nearly touching or thin part."""
+        if not self.separate_sheets:
+            return 0
+        return int(np.count_nonzero(~self._sheet_triangulation[1]))
+
+    @cached_property
+    def _sheet_triangulation(self) -> tuple[np.ndarray, np.ndarray]:
+        """(faces (f, 3), same_sheet (n, neighbors) bool): :attr:`local_triangles` and which neighbours its
+        stars were built from."""
         n, neighbours = self.n_vertices, self._neighbourhoods[1][:, 1:]
         same_sheet = np.einsum("nc,nkc->nk", self.normals, self.normals[neighbours]) > 0
         same_sheet[same_sheet.sum(axis=1) < 2] = True
@@ -169,14 +184,16 @@ class PointCloud:
             if not bridges.any():
                 break
             if attempt == _REJOIN_ROUNDS:  # still apart: no sheets are separated anywhere
-                faces = self._stars(np.arange(n), neighbours, np.ones_like(same_sheet))
+                same_sheet[:] = True
+                faces = self._stars(np.arange(n), neighbours, same_sheet)
                 break
             same_sheet |= bridges
             centers = np.flatnonzero(bridges.any(axis=1))
             rebuilt = self._stars(centers, neighbours, same_sheet)
             faces = np.vstack([faces[~np.isin(faces[:, 0], centers)], rebuilt])
         faces.flags.writeable = False
-        return faces
+        same_sheet.flags.writeable = False
+        return faces, same_sheet
 
     def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks."""
