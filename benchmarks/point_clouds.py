@@ -21,7 +21,7 @@ on clouds the Hamiltonian is at least as good as the LBO for every method, and w
 within 0.05) of the same method and basis on the mesh.
 
     OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--tosca-classes centaur horse] [--jobs 2]
-        [--methods hks] [--joined-sheets] [-o point_clouds.json]
+        [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
 """
 
 from __future__ import annotations
@@ -52,10 +52,10 @@ def pair_scores(
     points: int,
     methods=METHODS,
     orientation: float = 0.0,
-    separate_sheets: bool = True,
+    cloud_options: dict | None = None,
 ) -> list[dict]:
-    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair; ``separate_sheets``
-    as in :class:`hamsa.PointCloud`."""
+    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair; ``cloud_options``:
+    keywords of :class:`hamsa.PointCloud` (``separate_sheets``, ``off_sheet``)."""
     source, source_kept = dataset.load(source_name, largest_component=True)
     target, target_kept = dataset.load(target_name, largest_component=True)
     source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
@@ -66,7 +66,7 @@ def pair_scores(
     known = truth[half_s] >= 0
 
     def cloud(points):
-        return hamsa.PointCloud(points, separate_sheets=separate_sheets)
+        return hamsa.PointCloud(points, **(cloud_options or {}))
 
     nearest = cKDTree(target.vertices[half_t]).query(target.vertices[np.where(known, truth[half_s], 0)])[1]
     shapes = {
@@ -92,16 +92,14 @@ def pair_scores(
     return rows
 
 
-def spectrum_errors(dataset, name: str, k: int = 10) -> dict:
+def spectrum_errors(dataset, name: str, variants: dict, k: int = 10) -> dict:
     """Relative errors |E_i(cloud) / E_i(mesh) - 1| of the k lowest nonzero eigenvalues of one shape's vertices
-    as a cloud, with the sheets separated (hamsa's default) and joined (robust_laplacian's): mean and max."""
+    as a cloud, one (mean, max) per entry {label: PointCloud keywords} of ``variants``."""
     mesh = dataset.load(name, largest_component=True)[0].scaled_to_unit_area()
     on_mesh = hamsa.eigenbasis(mesh, k + 1).values[1:]
     row = {"shape": name, "n": mesh.n_vertices}
-    for label, separate in (("separated", True), ("joined", False)):
-        errors = np.abs(
-            hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, separate_sheets=separate), k + 1).values[1:] / on_mesh - 1
-        )
+    for label, options in variants.items():
+        errors = np.abs(hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, **options), k + 1).values[1:] / on_mesh - 1)
         row[label] = (float(errors.mean()), float(errors.max()))
     return row
 
@@ -150,17 +148,24 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--orientation", type=float, default=0.0, help="orientation-term weight of fmap's start map (default 0)"
     )
-    parser.add_argument(
+    sheets = parser.add_mutually_exclusive_group()
+    sheets.add_argument(
         "--joined-sheets",
         action="store_true",
         help="clouds with robust_laplacian's point-cloud Laplacian (PointCloud(separate_sheets=False))",
+    )
+    sheets.add_argument(
+        "--off-sheet",
+        type=float,
+        help="PointCloud(off_sheet=X): also leave out the neighbours X local spacings off a point's smooth sheet",
     )
     parser.add_argument(
         "--spectra",
         nargs="+",
         metavar="SHAPE",
         help="instead of matching: the 10 lowest eigenvalues of these shapes (SCAPE meshNNN, TOSCA names) as "
-        "clouds against their meshes, sheets separated and joined",
+        "clouds against their meshes: sheets separated by the normals, also off the sheet (--off-sheet, default 0.7), "
+        "and joined",
     )
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
@@ -169,12 +174,18 @@ def main(argv=None) -> int:
         return 1
     scape, tosca = load_scape(DATA / "scape"), load_tosca(DATA / "tosca_hires")
     if args.spectra:
-        print("| shape | n | separated: mean / max rel. error | joined (robust_laplacian): mean / max |")
-        print("|---|---|---|---|")
+        off_sheet = args.off_sheet or 0.7
+        variants = {
+            "separated (normals)": {},
+            f"off_sheet={off_sheet:g}": {"off_sheet": off_sheet},
+            "joined (robust_laplacian)": {"separate_sheets": False},
+        }
+        print(f"| shape | n | {' | '.join(f'{label}: mean / max rel. error' for label in variants)} |")
+        print(f"|---|---|{'---|' * len(variants)}")
         for name in args.spectra:
-            row = spectrum_errors(scape if name.startswith("mesh") else tosca, name)
-            (a, b), (c, d) = row["separated"], row["joined"]
-            print(f"| {name} | {row['n']} | {a:.3f} / {b:.3f} | {c:.3f} / {d:.3f} |", flush=True)
+            row = spectrum_errors(scape if name.startswith("mesh") else tosca, name, variants)
+            cells = " | ".join(f"{row[label][0]:.3f} / {row[label][1]:.3f}" for label in variants)
+            print(f"| {name} | {row['n']} | {cells} |", flush=True)
         return 0
     work = [(scape, *p) for p in dataset_pairs(scape)[: args.scape]]
     work += [
@@ -184,9 +195,10 @@ def main(argv=None) -> int:
     ]
     from joblib import Parallel, delayed
 
+    cloud_options = {"separate_sheets": not args.joined_sheets, "off_sheet": args.off_sheet}
     start = time.perf_counter()
     results = Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
-        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation, not args.joined_sheets)
+        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation, cloud_options)
         for dataset, s, t in work
     )
     rows = []

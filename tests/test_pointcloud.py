@@ -75,6 +75,43 @@ def test_the_neighbours_left_out_are_the_facing_sides_of_nearly_touching_parts()
     assert not np.isin(points * mesh.n_vertices + partners, in_stars).any()
     assert hamsa.PointCloud(mesh.vertices, separate_sheets=False).separated_neighbours == 0
     assert hamsa.PointCloud(hamsa.shapes.sphere(800).vertices).separated_neighbours == 0
+    with pytest.raises(hamsa.MeshError, match="off_sheet must be a positive number"):
+        hamsa.PointCloud(mesh.vertices, off_sheet=0.0)
+    with pytest.raises(hamsa.MeshError, match="choose one"):
+        hamsa.PointCloud(mesh.vertices, off_sheet=0.7, separate_sheets=False)
+
+
+def test_sheet_offsets_are_the_distances_from_the_points_own_plane():
+    grid = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), axis=-1).reshape(-1, 2)
+    jitter = np.random.default_rng(3).uniform(-0.2, 0.2, grid.shape)
+    lower = np.column_stack([grid + jitter, np.zeros(len(grid))])
+    sparse = np.stack(np.meshgrid(np.arange(0.0, 20.0, 2.0), np.arange(0.0, 20.0, 2.0)), axis=-1).reshape(-1, 2)
+    upper = np.column_stack([sparse + 0.5, np.full(len(sparse), 0.9)])  # a parallel sheet 0.9 above, sparser
+    cloud = hamsa.PointCloud(np.vstack([lower, upper]), off_sheet=0.7)
+    distances, indices = cloud._neighbourhoods
+    inner = np.flatnonzero(np.all(np.abs(grid - 9.5) < 5, axis=1))  # whole neighbourhoods on both sheets
+    others = indices[inner, 1:] >= len(grid)
+    spacing = distances[inner, 1:7].mean(axis=1, keepdims=True)
+    offsets = cloud.sheet_offsets[inner]
+    assert others.any(axis=1).all() and (~others).any(axis=1).all()
+    # the other sheet pulls the reweighted fit only slightly: to within a hundredth of a spacing
+    np.testing.assert_allclose(offsets, np.where(others, 0.9 / spacing, 0.0), atol=0.01)
+    assert np.all(offsets[others] > 0.7) and np.all(offsets[~others] < 0.01)  # off_sheet tells them apart
+    assert not cloud.sheet_offsets.flags.writeable
+
+
+@pytest.mark.data
+def test_off_sheet_separates_wide_contacts_where_the_normals_fail():
+    from conftest import data_mesh
+
+    mesh = data_mesh("tosca_hires/meshes/michael1.off.gz").scaled_to_unit_area()  # hands on the thighs
+    on_mesh = hamsa.eigenbasis(mesh, 11).values[1:]
+    errors = {}
+    for off_sheet in (None, 0.7):
+        cloud = hamsa.PointCloud(mesh.vertices, off_sheet=off_sheet)
+        errors[off_sheet] = np.abs(hamsa.eigenbasis(cloud, 11).values[1:] / on_mesh - 1)
+    assert errors[None].max() > 0.4  # measured 0.665: short circuits where the normals' signs fail
+    assert errors[0.7].max() < 0.15  # measured 0.087
 
 
 def test_flipped_normals_do_not_cut_the_surface(monkeypatch):
@@ -258,8 +295,15 @@ def test_command_line_takes_point_files_non_manifold_meshes_and_dirichlet_vertic
     assert main(args) == 0
     joined = hamsa.eigenbasis(hamsa.PointCloud(hand, separate_sheets=False), 5).values
     np.testing.assert_allclose(hamsa.Eigenbasis.load(tmp_path / "h.npz").values, joined)
+    assert main(["info", str(tmp_path / "hand.xyz"), "--off-sheet", "0.7"]) == 0
+    left_out = hamsa.PointCloud(hand, off_sheet=0.7).separated_neighbours
+    assert f"sheets          {left_out} of {30 * len(hand)} neighbour pairs left out (normals apart or 0.7" in (
+        capsys.readouterr().out
+    )
     assert main(["info", str(tmp_path / "book.off"), "--joined-sheets"]) == 2
     assert "--joined-sheets: for point clouds" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "hand.xyz"), "--joined-sheets", "--off-sheet", "0.7"]) == 2
+    assert "choose one" in capsys.readouterr().err
 
     np.savetxt(tmp_path / "posed.xyz", sphere.vertices @ np.diag([1.0, 1.0, 1.2]))
     out = tmp_path / "map.npy"

@@ -103,22 +103,39 @@ def _add_cloud_options(command) -> None:
         "by default they are left out where the estimated outward normals point apart): for clouds whose normals "
         "cannot be oriented, such as open scans; hamsa info counts the pairs left out",
     )
+    group.add_argument(
+        "--off-sheet",
+        type=float,
+        metavar="SPACINGS",
+        help="also leave out the neighbours this many local spacings off a point's smooth sheet, whatever the "
+        "normals say (e.g. 0.7: parts touching over a wide area, such as hands on thighs; default: off)",
+    )
 
 
 def _cloud_options(args) -> dict:
     """The PointCloud keywords of ``args`` (of :func:`_add_cloud_options`)."""
     from hamsa.pointcloud import DEFAULT_NEIGHBORS
 
-    return {"neighbors": args.neighbors or DEFAULT_NEIGHBORS, "separate_sheets": not args.joined_sheets}
+    return {
+        "neighbors": args.neighbors or DEFAULT_NEIGHBORS,
+        "separate_sheets": not args.joined_sheets,
+        "off_sheet": args.off_sheet,
+    }
 
 
 def _check_cloud_options(args, *shapes) -> None:
-    """Refuses --neighbors / --joined-sheets when none of the loaded shapes is a point cloud."""
+    """Refuses --neighbors / --joined-sheets / --off-sheet when none of the loaded shapes is a point cloud, and
+    --off-sheet with --joined-sheets (nothing is left out then)."""
     from hamsa.pointcloud import PointCloud
 
-    given = [
-        name for name, value in (("--neighbors", args.neighbors), ("--joined-sheets", args.joined_sheets)) if value
-    ]
+    options = (
+        ("--neighbors", args.neighbors),
+        ("--joined-sheets", args.joined_sheets),
+        ("--off-sheet", args.off_sheet),
+    )
+    given = [name for name, value in options if value is not None and value is not False]
+    if args.joined_sheets and args.off_sheet is not None:
+        raise HamsaError("--off-sheet leaves out neighbours, --joined-sheets keeps them all: choose one")
     if given and not any(isinstance(shape, PointCloud) for shape in shapes):
         raise HamsaError(f"{' and '.join(given)}: for point clouds, and no input here is one")
 
@@ -556,9 +573,12 @@ def _info(args) -> None:
         print(f"components      {cloud.n_components}")
         if cloud.separate_sheets:
             pairs = cloud.n_vertices * cloud.neighbors
+            rule = "normals apart" + (
+                "" if cloud.off_sheet is None else f" or {cloud.off_sheet:g} spacings off the sheet"
+            )
             print(
-                f"sheets          {cloud.separated_neighbours} of {pairs} neighbour pairs left out (facing sides of "
-                "nearly touching parts; --joined-sheets keeps them)"
+                f"sheets          {cloud.separated_neighbours} of {pairs} neighbour pairs left out ({rule}: facing "
+                "sides of nearly touching parts; --joined-sheets keeps them)"
             )
         else:
             print("sheets          joined (every point's star over all its nearest points)")

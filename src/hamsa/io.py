@@ -51,34 +51,43 @@ def point_format(path: str | os.PathLike) -> tuple[str, bool] | None:
 
 
 def load_shape(
-    path: str | os.PathLike, *, manifold: bool = True, neighbors: int = DEFAULT_NEIGHBORS, separate_sheets: bool = True
+    path: str | os.PathLike,
+    *,
+    manifold: bool = True,
+    neighbors: int = DEFAULT_NEIGHBORS,
+    separate_sheets: bool = True,
+    off_sheet: float | None = None,
 ) -> TriMesh | PointCloud:
     """The file as a :class:`TriMesh`, or as a :class:`~hamsa.pointcloud.PointCloud` when it holds points without
     faces (``.xyz`` / ``.pts`` / ``.txt`` / ``.npy``, or an OFF / OBJ / PLY whose face count is zero), read once.
 
-    ``manifold`` as in :func:`load_mesh`, ``neighbors`` and ``separate_sheets`` as in
+    ``manifold`` as in :func:`load_mesh`, ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
     :class:`~hamsa.pointcloud.PointCloud` (a mesh ignores them). Raises
     MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
     """
     if _suffix(path)[0] in POINTS_ONLY:
-        return load_point_cloud(path, neighbors, separate_sheets=separate_sheets)
+        return load_point_cloud(path, neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
     try:
         vertices, faces = read_mesh_arrays(path)
         if len(faces) == 0:
-            return PointCloud(vertices, neighbors=neighbors, separate_sheets=separate_sheets)
+            return PointCloud(vertices, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
         return TriMesh(vertices, faces, manifold=manifold)
     except MeshError as exc:
         raise _naming(path, exc) from None
 
 
 def load_point_cloud(
-    path: str | os.PathLike, neighbors: int = DEFAULT_NEIGHBORS, *, separate_sheets: bool = True
+    path: str | os.PathLike,
+    neighbors: int = DEFAULT_NEIGHBORS,
+    *,
+    separate_sheets: bool = True,
+    off_sheet: float | None = None,
 ) -> PointCloud:
     """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
     or commas; further columns such as normals or colours are ignored), ``.npy`` ((n, 3) or wider), or the
     vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
 
-    Points keep their file order; ``neighbors`` and ``separate_sheets`` as in
+    Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
     :class:`~hamsa.pointcloud.PointCloud`. Raises MeshError naming the file if it cannot be read or parsed, or if
     the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few, NaN, repeated).
     """
@@ -102,7 +111,7 @@ def load_point_cloud(
             points = _fixed_width(lines, 3, "point")
         else:
             points = read_mesh_arrays(path)[0]
-        return PointCloud(points, neighbors=neighbors, separate_sheets=separate_sheets)
+        return PointCloud(points, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
     except FileAccessError as exc:
         raise MeshError(str(exc)) from None
     except (ValueError, UnicodeDecodeError) as exc:

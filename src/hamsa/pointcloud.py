@@ -18,8 +18,9 @@ circuits"), as they are in robust_laplacian's ``point_cloud_laplacian``. hamsa's
 point's: the facing sides of two nearly touching parts (the built-in ``shapes.hand("curled")`` as a cloud
 then has the mesh's low spectrum, which robust_laplacian's operator misses; see docs/results/point_clouds.md).
 ``separate_sheets=False`` gives robust_laplacian's operator. The rule never splits the cloud into pieces,
-so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts)
-short circuits stay; use the mesh when there is one.
+so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts,
+wide contacts) short circuits stay; ``off_sheet=0.7`` also leaves out the neighbours that lie off a point's
+smooth sheet, whatever the normals say. Use the mesh when there is one.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & 
 # nearest points of the least-squares gradient and of the normals' orientation graph
 GRADIENT_NEIGHBORS = 10
 _REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
+_FIT_ROUNDS = 8  # reweighting rounds of the robust quadratic fit of a point's sheet (``off_sheet``)
 
 
 class PointCloud:
@@ -55,13 +57,19 @@ class PointCloud:
         Leave the neighbours on another sheet (outward normals pointing apart) out of each point's local
         triangulation (:attr:`local_triangles`); False: robust_laplacian's ``point_cloud_laplacian`` over
         all ``neighbors`` nearest points.
+    off_sheet : float, optional
+        With ``separate_sheets``, also leave out the neighbours farther than this many local spacings from
+        the point's smooth sheet (:attr:`sheet_offsets`), whatever the normals' signs: it separates parts
+        that touch over a wide area, where the normals' orientation fails. None (default): the normals
+        alone decide. 0.7 is the measured choice (docs/results/point_clouds.md).
 
     Raises
     ------
     MeshError
-        If the array is not real (n, 3), has non-finite or huge coordinates, has no more than
-        ``neighbors`` points, or repeats a point (two samples at one place have no tangent-plane
-        triangulation between them; remove duplicates first).
+        If the array is not real (n, 3), has non-finite or huge coordinates, has no more than ``neighbors``
+        points or repeats a point (two samples at one place have no tangent-plane triangulation between
+        them; remove duplicates first), or if ``off_sheet`` is not a positive number or comes with
+        ``separate_sheets=False``.
 
     Examples
     --------
@@ -73,12 +81,22 @@ class PointCloud:
     """
 
     def __init__(
-        self, points, *, neighbors: int = DEFAULT_NEIGHBORS, mollify: float = 1e-5, separate_sheets: bool = True
+        self,
+        points,
+        *,
+        neighbors: int = DEFAULT_NEIGHBORS,
+        mollify: float = 1e-5,
+        separate_sheets: bool = True,
+        off_sheet: float | None = None,
     ):
         points = as_coordinates(points, "points")
         check_coordinates(points, "points")
         if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
             raise MeshError(f"neighbors must be an integer >= 3, got {neighbors!r}")
+        if off_sheet is not None and not (isinstance(off_sheet, (int, float, np.number)) and 0 < off_sheet < np.inf):
+            raise MeshError(f"off_sheet must be a positive number of spacings or None, got {off_sheet!r}")
+        if off_sheet is not None and not separate_sheets:
+            raise MeshError("off_sheet leaves neighbours out, separate_sheets=False keeps them all: choose one")
         if len(points) <= neighbors:
             raise MeshError(
                 f"a point cloud needs more than neighbors = {neighbors} points for its local triangulations, "
@@ -99,6 +117,7 @@ class PointCloud:
         self.neighbors = int(neighbors)
         self.mollify = float(mollify)
         self.separate_sheets = bool(separate_sheets)
+        self.off_sheet = None if off_sheet is None else float(off_sheet)
 
     @property
     def vertices(self) -> np.ndarray:
@@ -117,7 +136,7 @@ class PointCloud:
     def __repr__(self) -> str:
         return (
             f"PointCloud(n_points={self.n_vertices}, neighbors={self.neighbors}, "
-            f"separate_sheets={self.separate_sheets})"
+            f"separate_sheets={self.separate_sheets}, off_sheet={self.off_sheet})"
         )
 
     @cached_property
@@ -156,7 +175,9 @@ class PointCloud:
         keeps all of them, and a neighbour that the rule leaves in another piece of the triangulation (a
         patch of flipped normals, cut off along its rim) is given back, with the stars rebuilt, for up to
         :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join are still apart after them,
-        every point keeps all its neighbours. Read-only."""
+        every point keeps all its neighbours. With ``off_sheet``, a neighbour off the point's smooth sheet
+        (:attr:`sheet_offsets`) is on another sheet too, and the rounds give back the neighbours on the
+        smooth sheet first (they are the rim of a flipped patch; the others, the gap of a contact). Read-only."""
         return self._sheet_triangulation[0]
 
     @property
@@ -174,16 +195,22 @@ class PointCloud:
         stars were built from."""
         n, neighbours = self.n_vertices, self._neighbourhoods[1][:, 1:]
         same_sheet = np.einsum("nc,nkc->nk", self.normals, self.normals[neighbours]) > 0
+        if self.off_sheet is not None:
+            smooth = self.sheet_offsets <= self.off_sheet
+            same_sheet &= smooth
         same_sheet[same_sheet.sum(axis=1) < 2] = True
         faces = self._stars(np.arange(n), neighbours, same_sheet)
         for attempt in range(_REJOIN_ROUNDS + 1):
             edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
             graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
             pieces = connected_components(graph, directed=False)[1]
-            bridges = pieces[:, None] != pieces[neighbours]  # neighbours the rule left in another piece
-            if not bridges.any():
+            apart = pieces[:, None] != pieces[neighbours]
+            if not apart.any():
                 break
-            if attempt == _REJOIN_ROUNDS:  # still apart: no sheets are separated anywhere
+            bridges = apart & ~same_sheet  # neighbours the rule left in another piece
+            if self.off_sheet is not None and (bridges & smooth).any():
+                bridges &= smooth  # first those on the point's smooth sheet (a flipped patch's rim)
+            if attempt == _REJOIN_ROUNDS or not bridges.any():  # still apart: no sheets are separated anywhere
                 same_sheet[:] = True
                 faces = self._stars(np.arange(n), neighbours, same_sheet)
                 break
@@ -194,6 +221,39 @@ class PointCloud:
         faces.flags.writeable = False
         same_sheet.flags.writeable = False
         return faces, same_sheet
+
+    @cached_property
+    def sheet_offsets(self) -> np.ndarray:
+        """(n, neighbors) read-only: how far each of the point's ``neighbors`` nearest points q (in order of
+        distance) lies from the point p's smooth sheet, in local spacings
+        (the mean distance from p to its six nearest points): ``|w_q - w(u_q)|``, with (u_q, w_q) the
+        tangent-plane coordinates and height of q - p, and w(u) = g . u + u^T H u / 2 the quadratic height
+        function through p fitted to all neighbours by least squares reweighted with Cauchy weights
+        (:data:`_FIT_ROUNDS` rounds, residual scale 1.4826 x the median absolute residual, at least 0.02
+        spacings). The points of p's own sheet fit it to the order of the sampling's roughness; the facing
+        side of a part that nearly touches, a minority of the neighbourhood, stays off it by the gap."""
+        distances, indices = self._neighbourhoods
+        neighbours = indices[:, 1:]
+        spacing = distances[:, 1:7].mean(axis=1)
+        offsets = np.empty(neighbours.shape)
+        for rows in _chunks(len(neighbours), 16 * neighbours.shape[1]):  # the fit's (chunk, K, 5) arrays
+            design, height = _quadratic_design(self._points, self.normals, rows, neighbours[rows])
+            unit = spacing[rows, None, None]  # lengths in local spacings: a well-conditioned fit at any scale
+            design[..., :2] /= unit
+            design[..., 2:] /= unit**2
+            height /= unit[..., 0]
+            weights = np.ones_like(height)
+            for _ in range(_FIT_ROUNDS):
+                normal_matrix = np.einsum("nk,nki,nkj->nij", weights, design, design) + 1e-6 * np.eye(5)
+                moments = np.einsum("nk,nki,nk->ni", weights, design, height)
+                residual = height - np.einsum(
+                    "nki,ni->nk", design, np.linalg.solve(normal_matrix, moments[..., None])[..., 0]
+                )
+                scale = np.maximum(1.4826 * np.median(np.abs(residual), axis=1, keepdims=True), 0.02)
+                weights = 1.0 / (1.0 + (residual / (2.0 * scale)) ** 2)
+            offsets[rows] = np.abs(residual)
+        offsets.flags.writeable = False
+        return offsets
 
     def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks."""
@@ -282,12 +342,9 @@ class PointCloud:
         n, normals = self.n_vertices, self.normals
         weights = np.empty((n, 3, GRADIENT_NEIGHBORS))  # gradient at p = sum_k w_k (f_k - f_p)
         for chunk in _chunks(n, 16 * GRADIENT_NEIGHBORS):  # the fit's (chunk, K, 5) arrays: bounded memory
-            normal = normals[chunk]
-            frame = _tangent_frames(normal)
-            offsets = self._points[neighbours[chunk]] - self._points[chunk, None, :]  # (chunk, K, 3)
-            u, v = np.einsum("nkc,nac->ank", offsets, frame)  # (chunk, K) tangent coordinates
-            fit = np.linalg.pinv(np.stack([u, v, u * u, u * v, v * v], axis=2))[:, :2]  # (chunk, 2, K)
-            weights[chunk] = np.einsum("nak,nac->nck", fit, frame)
+            design, _ = _quadratic_design(self._points, normals, chunk, neighbours[chunk])
+            fit = np.linalg.pinv(design)[:, :2]  # (chunk, 2, K): the linear part in tangent coordinates
+            weights[chunk] = np.einsum("nak,nac->nck", fit, _tangent_frames(normals[chunk]))
         rows = np.repeat(np.arange(3 * n), GRADIENT_NEIGHBORS)
         columns = np.repeat(neighbours[:, None, :], 3, axis=1).reshape(-1)
         G = sp.csr_matrix((weights.reshape(-1), (rows, columns)), shape=(3 * n, n))
@@ -316,7 +373,13 @@ class PointCloud:
         return self._with_points(self._points[indices])
 
     def _with_points(self, points) -> PointCloud:
-        return PointCloud(points, neighbors=self.neighbors, mollify=self.mollify, separate_sheets=self.separate_sheets)
+        return PointCloud(
+            points,
+            neighbors=self.neighbors,
+            mollify=self.mollify,
+            separate_sheets=self.separate_sheets,
+            off_sheet=self.off_sheet,
+        )
 
 
 def _tangent_frames(normals: np.ndarray) -> np.ndarray:
@@ -325,6 +388,15 @@ def _tangent_frames(normals: np.ndarray) -> np.ndarray:
     first = np.cross(normals, helper)
     first /= np.linalg.norm(first, axis=1, keepdims=True)
     return np.stack([first, np.cross(normals, first)], axis=1)
+
+
+def _quadratic_design(points, normals, rows, neighbours) -> tuple[np.ndarray, np.ndarray]:
+    """(design (r, K, 5), height (r, K)) of the points ``rows`` and their neighbours (r, K): with (u, v) the
+    coordinates of q - p on the plane normal to p's normal (the axes of :func:`_tangent_frames`) and w its
+    height along the normal, the monomials [u, v, u^2, uv, v^2] of a quadratic through p, and w."""
+    offsets = points[neighbours] - points[rows, None, :]  # (r, K, 3)
+    u, v = np.einsum("nkc,nac->ank", offsets, _tangent_frames(normals[rows]))
+    return np.stack([u, v, u * u, u * v, v * v], axis=2), np.einsum("nkc,nc->nk", offsets, normals[rows])
 
 
 def _transported_agreement(points, normals, rows, columns) -> np.ndarray:
