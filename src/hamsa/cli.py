@@ -1018,9 +1018,9 @@ def _view(args) -> None:
             "--potential is for the eigenfunctions view computed here (not with --basis/--field/--modes/--map)"
         )
     shape = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
-    _check_cloud_options(args, shape.mesh)
+    target = _load_for_operators(args.target, args.repair, cloud=_cloud_options(args)) if args.map else None
+    _check_cloud_options(args, shape.mesh, *([] if target is None else [target.mesh]))
     if args.map:
-        target = _load_for_operators(args.target, args.repair, cloud=_cloud_options(args))
         mapping = _load_ids(args.map)
         if shape.vertex_ids is not None or target.vertex_ids is not None:
             raise HamsaError("--map shows a map between the meshes as given: leave out --repair")
