@@ -237,7 +237,7 @@ class PointCloud:
         spacing = distances[:, 1:7].mean(axis=1)
         offsets = np.empty(neighbours.shape)
         for rows in _chunks(len(neighbours), 16 * neighbours.shape[1]):  # the fit's (chunk, K, 5) arrays
-            design, height = _quadratic_design(self._points, self.normals, rows, neighbours[rows])
+            design, height, _ = _quadratic_design(self._points, self.normals, rows, neighbours[rows])
             unit = spacing[rows, None, None]  # lengths in local spacings: a well-conditioned fit at any scale
             design[..., :2] /= unit
             design[..., 2:] /= unit**2
@@ -342,9 +342,9 @@ class PointCloud:
         n, normals = self.n_vertices, self.normals
         weights = np.empty((n, 3, GRADIENT_NEIGHBORS))  # gradient at p = sum_k w_k (f_k - f_p)
         for chunk in _chunks(n, 16 * GRADIENT_NEIGHBORS):  # the fit's (chunk, K, 5) arrays: bounded memory
-            design, _ = _quadratic_design(self._points, normals, chunk, neighbours[chunk])
+            design, _, frames = _quadratic_design(self._points, normals, chunk, neighbours[chunk])
             fit = np.linalg.pinv(design)[:, :2]  # (chunk, 2, K): the linear part in tangent coordinates
-            weights[chunk] = np.einsum("nak,nac->nck", fit, _tangent_frames(normals[chunk]))
+            weights[chunk] = np.einsum("nak,nac->nck", fit, frames)
         rows = np.repeat(np.arange(3 * n), GRADIENT_NEIGHBORS)
         columns = np.repeat(neighbours[:, None, :], 3, axis=1).reshape(-1)
         G = sp.csr_matrix((weights.reshape(-1), (rows, columns)), shape=(3 * n, n))
@@ -390,13 +390,15 @@ def _tangent_frames(normals: np.ndarray) -> np.ndarray:
     return np.stack([first, np.cross(normals, first)], axis=1)
 
 
-def _quadratic_design(points, normals, rows, neighbours) -> tuple[np.ndarray, np.ndarray]:
-    """(design (r, K, 5), height (r, K)) of the points ``rows`` and their neighbours (r, K): with (u, v) the
-    coordinates of q - p on the plane normal to p's normal (the axes of :func:`_tangent_frames`) and w its
-    height along the normal, the monomials [u, v, u^2, uv, v^2] of a quadratic through p, and w."""
+def _quadratic_design(points, normals, rows, neighbours) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(design (r, K, 5), height (r, K), frames (r, 2, 3)) of the points ``rows`` and their neighbours (r, K):
+    with (u, v) the coordinates of q - p on the plane normal to p's normal (the axes ``frames`` of
+    :func:`_tangent_frames`) and w its height along the normal, the monomials [u, v, u^2, uv, v^2] of a
+    quadratic through p, and w."""
     offsets = points[neighbours] - points[rows, None, :]  # (r, K, 3)
-    u, v = np.einsum("nkc,nac->ank", offsets, _tangent_frames(normals[rows]))
-    return np.stack([u, v, u * u, u * v, v * v], axis=2), np.einsum("nkc,nc->nk", offsets, normals[rows])
+    frames = _tangent_frames(normals[rows])
+    u, v = np.einsum("nkc,nac->ank", offsets, frames)
+    return np.stack([u, v, u * u, u * v, v * v], axis=2), np.einsum("nkc,nc->nk", offsets, normals[rows]), frames
 
 
 def _transported_agreement(points, normals, rows, columns) -> np.ndarray:
