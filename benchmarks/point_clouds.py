@@ -20,8 +20,10 @@ AUC on [0, 0.25] and the fraction within 0.05, averaged over pairs, and the bar 
 on clouds the Hamiltonian is at least as good as the LBO for every method, and within 5 points (fraction
 within 0.05) of the same method and basis on the mesh.
 
-    OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--tosca-classes centaur horse] [--jobs 2]
-        [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
+    OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--scape-skip 0] [--tosca-classes centaur horse]
+        [--jobs 2] [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
+    python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
+    python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
 """
 
 from __future__ import annotations
@@ -104,6 +106,38 @@ def spectrum_errors(dataset, name: str, variants: dict, k: int = 10) -> dict:
     return row
 
 
+def sign_errors(dataset, source_name: str, target_name: str, k: int = 100) -> dict:
+    """Wrong signs among the matching potential's functions psi_1..psi_4 when the target's are chosen without
+    ground truth (:func:`hamsa.matching.resolve_signs_without_truth`), by the HKS moments alone and with the
+    chirality term, on the meshes and on their vertices as clouds: {representation: (moments, chirality,
+    decided)}, ``decided`` counting the functions whose true sign is clear (|<psi_s, psi_t o map>_A| > 0.5)."""
+    from hamsa.matching import resolve_signs, resolve_signs_without_truth
+
+    source, source_kept = dataset.load(source_name, largest_component=True)
+    target, target_kept = dataset.load(target_name, largest_component=True)
+    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
+    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    known = truth >= 0
+    indices = (1, 2, 3, 4)
+    counts = {}
+    for representation, shapes in (
+        ("mesh", (source, target)),
+        ("cloud", (hamsa.PointCloud(source.vertices), hamsa.PointCloud(target.vertices))),
+    ):
+        bases = [hamsa.eigenbasis(shape, k) for shape in shapes]
+        weights = bases[0].mass.diagonal()[known]
+        agreement = np.sum(
+            weights[:, None] * bases[0].vectors[known][:, 1:5] * bases[1].vectors[truth[known]][:, 1:5], axis=0
+        )
+        clear = np.abs(agreement) > 0.5
+        true_signs = resolve_signs(*bases, truth, indices)
+        counts[representation] = tuple(
+            int(np.sum((resolve_signs_without_truth(*bases, indices, meshes=meshes) != true_signs) & clear))
+            for meshes in (None, shapes)
+        ) + (int(clear.sum()),)
+    return counts
+
+
 def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
     """The markdown table of pair means and the list of bar failures."""
     lines = [
@@ -139,6 +173,7 @@ def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scape", type=int, default=5, help="SCAPE pairs: mesh000 -> mesh001..mesh00N (default 5)")
+    parser.add_argument("--scape-skip", type=int, default=0, help="start the SCAPE pairs after the first N of them")
     parser.add_argument("--tosca-limit", type=int, default=1, help="TOSCA pairs per class (default 1)")
     parser.add_argument("--tosca-classes", nargs="+", help="only these TOSCA classes (default: all)")
     parser.add_argument("-k", type=int, default=100)
@@ -167,6 +202,13 @@ def main(argv=None) -> int:
         "clouds against their meshes: sheets separated by the normals, also off the sheet (--off-sheet, default 0.7), "
         "and joined",
     )
+    parser.add_argument(
+        "--signs",
+        nargs="+",
+        metavar="SOURCE:TARGET",
+        help="instead of matching: the wrong signs of the matching potential's functions chosen without ground "
+        "truth on these pairs (e.g. mesh000:mesh004 cat0:cat1), meshes and clouds, moments alone and with chirality",
+    )
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
@@ -187,7 +229,19 @@ def main(argv=None) -> int:
             cells = " | ".join(f"{row[label][0]:.3f} / {row[label][1]:.3f}" for label in variants)
             print(f"| {name} | {row['n']} | {cells} |", flush=True)
         return 0
-    work = [(scape, *p) for p in dataset_pairs(scape)[: args.scape]]
+    if args.signs:
+        print("| pair | mesh: moments / with chirality | cloud: moments / with chirality | clear (mesh / cloud) |")
+        print("|---|---|---|---|")
+        total = np.zeros(6, dtype=int)
+        for pair in args.signs:
+            source_name, target_name = pair.split(":")
+            counts = sign_errors(scape if source_name.startswith("mesh") else tosca, source_name, target_name, args.k)
+            (mesh_m, mesh_c, mesh_n), (cloud_m, cloud_c, cloud_n) = counts["mesh"], counts["cloud"]
+            total += [mesh_m, mesh_c, cloud_m, cloud_c, mesh_n, cloud_n]
+            print(f"| {pair} | {mesh_m} / {mesh_c} | {cloud_m} / {cloud_c} | {mesh_n} / {cloud_n} |", flush=True)
+        print(f"| total | {total[0]} / {total[1]} | {total[2]} / {total[3]} | {total[4]} / {total[5]} |")
+        return 0
+    work = [(scape, *p) for p in dataset_pairs(scape)[args.scape_skip : args.scape_skip + args.scape]]
     work += [
         (tosca, *p)
         for p in dataset_pairs(tosca, args.tosca_limit)

@@ -524,16 +524,35 @@ def test_signs_without_truth_ignore_rigid_motions_winding_and_a_common_reflectio
         np.testing.assert_array_equal(resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=meshes), expected)
 
 
-def test_signs_without_truth_on_point_clouds_use_the_moments_alone(posed_humanoids):
-    from hamsa.matching import resolve_signs_without_truth
+def test_signs_without_truth_tell_the_mirror_image_on_point_clouds(posed_humanoids):
+    """Clouds of the two bodies (their own bases): the chirality with the mean curvature normal, which needs
+    no normal's sign, undoes every pattern of flips, the antisymmetric functions' included, which the
+    moments alone cannot; so does a mesh against a cloud (the same field on both), under a rigid motion
+    and a reflection of both."""
+    from hamsa.matching import resolve_signs, resolve_signs_without_truth
 
-    meshes, (rest, walk) = posed_humanoids
-    target = _flipped(walk, [-1, 1, 1, -1])
+    meshes, _ = posed_humanoids
     clouds = tuple(hamsa.PointCloud(m.vertices) for m in meshes)
-    np.testing.assert_array_equal(
-        resolve_signs_without_truth(rest, target, (1, 2, 3, 4), meshes=clouds),
-        resolve_signs_without_truth(rest, target, (1, 2, 3, 4)),
+    rest, walk = (hamsa.eigenbasis(cloud, 20) for cloud in clouds)
+    indices = (1, 2, 3, 4)
+    angle = 0.9
+    rotation = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    mirror = np.diag([-1.0, 1.0, 1.0])
+    layouts = (
+        clouds,
+        (clouds[0], hamsa.PointCloud(meshes[1].vertices @ rotation.T + [3.0, -1.0, 2.0])),
+        tuple(hamsa.PointCloud(m.vertices @ mirror) for m in meshes),
+        (clouds[0], meshes[1]),
     )
+    moments_wrong = 0
+    for flips in ([1, 1, 1, 1], [1, -1, 1, -1], [-1, -1, 1, 1], [-1, 1, -1, -1]):
+        target = _flipped(walk, flips)
+        truth = resolve_signs(rest, target, np.arange(rest.n), indices)
+        assert truth.tolist() == flips
+        for layout in layouts:
+            np.testing.assert_array_equal(resolve_signs_without_truth(rest, target, indices, meshes=layout), truth)
+        moments_wrong += np.sum(resolve_signs_without_truth(rest, target, indices) != truth)
+    assert moments_wrong > 0
     with pytest.raises(HamsaError, match="vertices"):
         resolve_signs_without_truth(rest, target, (1, 2), meshes=(meshes[0], shapes.icosphere(2)))
 

@@ -42,14 +42,18 @@ def resolve_signs_without_truth(
       depend on signs, so these moments correspond between near-isometric shapes; they vanish for a
       function that an intrinsic left-right symmetry reverses (psi_j o T = -psi_j), because h_t is
       symmetric.
-    - with ``meshes`` (the two triangle meshes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times
-      t < u, with ``n_t = int h_t N dA`` (the HKS-weighted outward normal, the faces oriented
-      consistently and N so that the signed volume is positive) and ``x_j = int psi_j (X - X_mean) dA``
-      (the function's first moment in space), each vector normalized. The determinant is unchanged by
+    - with ``meshes`` (the two shapes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times t < u, with
+      ``n_t = int h_t N dA`` (the HKS-weighted outward normal) and ``x_j = int psi_j (X - X_mean) dA`` (the
+      function's first moment in space), each vector normalized. The determinant is unchanged by
       rotations, translations and scaling and reverses under a reflection, so it tells an antisymmetric
       function from its mirror image — which no intrinsic quantity can — and it is largest exactly where
-      the moments vanish. Point clouds get the moments alone (docs/any-geometry.md says why); on a
-      left-right symmetric cloud the antisymmetric functions' signs are then a coin toss.
+      the moments vanish. On two triangle meshes N is the unit vertex normal, the faces oriented
+      consistently and outward (positive signed volume). Where either shape is a
+      :class:`~hamsa.PointCloud`, N is the mean curvature normal ``kappa N = -Laplace X`` on both, so
+      ``n_t = X^T W h_t`` (W the stiffness of :func:`hamsa.operators.laplacian_operators`): it needs no
+      normal's sign. A cloud's estimated normals get their signs wrong at a few points, mostly at the
+      extremities where h_t is largest, and the unit normals' integral, which nearly cancels over a
+      closed surface, turns with them.
 
     Like :func:`resolve_signs` it assumes the functions correspond in order (no swap of near-equal
     eigenvalues) and shapes posed alike up to a rigid motion; a reflected scan gives the mirrored signs.
@@ -68,7 +72,7 @@ def resolve_signs_without_truth(
         raise HamsaError(f"indices must be below k = {k}")
     times = default_hks_times(source, int(scales))
     shapes = (None, None) if meshes is None else tuple(as_shape(shape) for shape in meshes)
-    oriented = all(isinstance(shape, TriMesh) for shape in shapes)
+    curvature = not all(isinstance(shape, TriMesh) for shape in shapes)  # the same field on both shapes
     features = []
     for basis, shape in zip((source, target), shapes):
         if shape is not None and shape.n_vertices != basis.n:
@@ -78,8 +82,9 @@ def resolve_signs_without_truth(
         heat = heat / (weights @ heat)
         functions = basis.vectors[:, indices]
         parts = [(weights[:, None] * heat).T @ functions]  # (T, m) moments
-        if oriented:
-            parts.append(_chirality(shape, weights, heat, functions))
+        if shape is not None:
+            field = _curvature_normals(shape) if curvature else _outward_normals(shape, weights)
+            parts.append(_chirality(field, shape.vertices, weights, heat, functions))
         features.append(np.concatenate(parts))
     return np.where(np.sum(features[0] * features[1], axis=0) >= 0, 1.0, -1.0)
 
@@ -103,19 +108,33 @@ def matching_potentials(
     return V_s / V_s.max(), V_t / V_t.max()
 
 
-def _chirality(mesh: TriMesh, weights: np.ndarray, heat: np.ndarray, functions: np.ndarray) -> np.ndarray:
-    """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of :func:`resolve_signs_without_truth`."""
-    from hamsa.repair import orient_faces
-
-    mesh = orient_faces(mesh)  # a few flipped faces would bend the near-cancelling mean normals
-    outward = np.sign(mesh.signed_volume) or 1.0
-    centred = mesh.vertices - weights @ mesh.vertices / weights.sum()
-    normals = (weights[:, None] * heat).T @ (outward * mesh.vertex_normals)  # (T, 3)
+def _chirality(field, points, weights, heat, functions) -> np.ndarray:
+    """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of
+    :func:`resolve_signs_without_truth`, with ``n_t = heat[:, t] @ field`` for the area-weighted vector
+    field (n, 3) and x_j the first moments of the ``functions`` (n, m) about the centroid of ``points``."""
+    centred = points - weights @ points / weights.sum()
+    normals = heat.T @ field  # (T, 3)
     moments = functions.T @ (weights[:, None] * centred)  # (m, 3)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
     moments /= np.maximum(np.linalg.norm(moments, axis=1, keepdims=True), 1e-300)
     t, u = np.triu_indices(len(normals), 1)
     return np.cross(normals[t], normals[u]) @ moments.T
+
+
+def _outward_normals(mesh: TriMesh, weights: np.ndarray) -> np.ndarray:
+    """(n, 3) vertex unit normals times ``weights``, the faces oriented consistently and outward."""
+    from hamsa.repair import orient_faces
+
+    mesh = orient_faces(mesh)  # a few flipped faces would bend the near-cancelling mean normals
+    outward = np.sign(mesh.signed_volume) or 1.0
+    return outward * weights[:, None] * mesh.vertex_normals
+
+
+def _curvature_normals(shape) -> np.ndarray:
+    """(n, 3) ``W X``: the mean curvature normal -Laplace X times the lumped area, of a mesh or a cloud."""
+    from hamsa.operators import laplacian_operators
+
+    return laplacian_operators(shape)[0] @ shape.vertices
 
 
 def intrinsic_symmetry_signs(
