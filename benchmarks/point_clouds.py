@@ -12,8 +12,8 @@ representations of the same shapes:
   the true image of a source point is the target point nearest (Euclidean) to its true vertex.
 
 Methods and settings are ``hamsa benchmark-matching``'s defaults: ``hks`` (nearest neighbours of scaled
-HKS), ``fmap`` (HKS functional map + ICP + ZoomOut) with the paper's eigenfunction-sum potential (signs from
-the ground truth, as there), and ``icskm`` from 3 seeded ground-truth landmarks with the landmark potential
+HKS), ``fmap`` (HKS functional map + ICP + ZoomOut) with the paper's eigenfunction-sum potential (its signs
+chosen from the shapes alone, as there), and ``icskm`` from 3 seeded ground-truth landmarks with the landmark potential
 (geodesic distance, scale 1); k = 100, 1000 evaluated points. Errors are measured by geodesics on the target
 itself: the heat method on a mesh, the point-cloud heat method (potpourri3d) on a cloud. The table gives the
 AUC on [0, 0.25] and the fraction within 0.05, averaged over pairs, and the bar of the point-cloud issue:
