@@ -46,6 +46,15 @@ METHODS = ("hks", "fmap", "icskm")
 REPRESENTATIONS = ("mesh", "cloud", "cloud 50%")
 
 
+def unit_area_pair(dataset, source_name: str, target_name: str):
+    """(source, target, truth): the pair's meshes reduced to their largest components and scaled to unit area,
+    and the target vertex of each source vertex (-1 where unknown)."""
+    source, source_kept = dataset.load(source_name, largest_component=True)
+    target, target_kept = dataset.load(target_name, largest_component=True)
+    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    return source.scaled_to_unit_area(), target.scaled_to_unit_area(), truth
+
+
 def pair_scores(
     dataset,
     source_name: str,
@@ -58,10 +67,7 @@ def pair_scores(
 ) -> list[dict]:
     """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair; ``cloud_options``:
     keywords of :class:`hamsa.PointCloud` (``separate_sheets``, ``off_sheet``)."""
-    source, source_kept = dataset.load(source_name, largest_component=True)
-    target, target_kept = dataset.load(target_name, largest_component=True)
-    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
-    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    source, target, truth = unit_area_pair(dataset, source_name, target_name)
     rng = np.random.default_rng(0)
     half_s = np.sort(rng.choice(source.n_vertices, source.n_vertices // 2, replace=False))
     half_t = np.sort(rng.choice(target.n_vertices, target.n_vertices // 2, replace=False))
@@ -113,10 +119,7 @@ def sign_errors(dataset, source_name: str, target_name: str, k: int = 100) -> di
     decided)}, ``decided`` counting the functions whose true sign is clear (|<psi_s, psi_t o map>_A| > 0.5)."""
     from hamsa.matching import resolve_signs, resolve_signs_without_truth
 
-    source, source_kept = dataset.load(source_name, largest_component=True)
-    target, target_kept = dataset.load(target_name, largest_component=True)
-    source, target = source.scaled_to_unit_area(), target.scaled_to_unit_area()
-    truth = identity_truth(source_kept, target_kept, int(max(source_kept.max(), target_kept.max())) + 1)
+    source, target, truth = unit_area_pair(dataset, source_name, target_name)
     known = truth >= 0
     indices = (1, 2, 3, 4)
     counts = {}
