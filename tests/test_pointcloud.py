@@ -58,7 +58,7 @@ def test_nearly_touching_parts_are_not_joined_when_sheets_are_separated():
     on_mesh = hamsa.eigenbasis(mesh, 11).values[1:]
     separated = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 11).values[1:]
     joined = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, separate_sheets=False), 11).values[1:]
-    assert np.max(np.abs(separated / on_mesh - 1)) < 0.06  # measured 0.046
+    assert np.max(np.abs(separated / on_mesh - 1)) < 0.08  # measured 0.066
     assert np.max(np.abs(joined / on_mesh - 1)) > 0.3  # robust_laplacian's short circuits: measured 0.64
 
 
@@ -112,6 +112,33 @@ def test_off_sheet_separates_wide_contacts_where_the_normals_fail():
         errors[off_sheet] = np.abs(hamsa.eigenbasis(cloud, 11).values[1:] / on_mesh - 1)
     assert errors[None].max() > 0.4  # measured 0.665: short circuits where the normals' signs fail
     assert errors[0.7].max() < 0.15  # measured 0.087
+
+
+@pytest.mark.parametrize("turn", ["across the line", "about the line"])
+def test_star_triangles_that_join_two_sheets_across_a_crease_are_left_out(turn):
+    from hamsa.pointcloud import _delaunay_stars
+
+    grid = np.stack(np.meshgrid(np.arange(-10.0, 11.0), np.arange(-10.0, 11.0)), axis=-1).reshape(-1, 2)
+    grid = grid[(grid[:, 0] != 0) | (grid[:, 1] % 3 == 0)]  # the line x = 0 sampled three times sparser
+    points = np.column_stack([grid + np.random.default_rng(5).uniform(-0.2, 0.2, grid.shape), np.zeros(len(grid))])
+    side = np.where(np.abs(grid[:, 0]) > 0, np.sign(grid[:, 0]), 0)  # -1, 0 (on the line), 1
+    normals = np.zeros_like(points)  # on the line "up"; each side tilted 65 degrees away from it
+    normals[:, 2] = np.where(side == 0, 1.0, np.cos(np.radians(65)))
+    normals[:, 0 if turn == "across the line" else 1] = side * np.sin(np.radians(65))
+    cloud = hamsa.PointCloud(points)
+    cloud.__dict__["normals"] = normals
+    neighbours = cloud._neighbourhoods[1][:, 1:]
+    same_sheet = np.einsum("nc,nkc->nk", normals, normals[neighbours]) > 0  # the points on the line see both sides
+
+    def joining(faces):  # triangles with a corner on each side
+        return int(((side[faces] == -1).any(axis=1) & (side[faces] == 1).any(axis=1)).sum())
+
+    stars = _delaunay_stars(points, normals, np.arange(len(points)), neighbours, same_sheet)
+    assert joining(stars) > 10  # measured 14: the sides' normals point apart (130 degrees)
+    if turn == "across the line":  # a sharp fold: the surface turns between the two sides, one sheet
+        assert joining(cloud.local_triangles) == joining(stars)
+    else:  # normals twisted about the line a rim runs along: two sheets that meet there
+        assert joining(cloud.local_triangles) == 0
 
 
 def test_flipped_normals_do_not_cut_the_surface(monkeypatch):

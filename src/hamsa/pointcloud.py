@@ -16,7 +16,8 @@ body) closer than about the neighbourhood's radius would be joined by the local 
 circuits"), as they are in robust_laplacian's ``point_cloud_laplacian``. hamsa's own local triangulations
 (:attr:`PointCloud.local_triangles`) leave out the neighbours whose outward normal points away from the
 point's: the facing sides of two nearly touching parts (the built-in ``shapes.hand("curled")`` as a cloud
-then has the mesh's low spectrum, which robust_laplacian's operator misses; see docs/results/point_clouds.md).
+then has the mesh's low spectrum, which robust_laplacian's operator misses; see docs/results/point_clouds.md),
+and the triangles whose far edge joins two sheets where parts meet along a crease.
 ``separate_sheets=False`` gives robust_laplacian's operator. The rule never splits the cloud into pieces,
 so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts,
 wide contacts) short circuits stay; ``off_sheet=0.7`` also leaves out the neighbours that lie off a point's
@@ -170,12 +171,17 @@ class PointCloud:
         A neighbour q of p is on another sheet when their outward normals (:attr:`normals`) point apart,
         ``n_p . n_q <= 0``: where two parts of a surface nearly touch (an arm against the body) their
         facing sides have opposite outward normals, and so do the two sides of a part thinner than the
-        neighbourhood; joining them would short-circuit the Laplacian. A wrongly oriented normal must not
-        cut the surface itself, hence two safeguards: a point with fewer than two neighbours on its sheet
-        keeps all of them, and a neighbour that the rule leaves in another piece of the triangulation (a
-        patch of flipped normals, cut off along its rim) is given back, with the stars rebuilt, for up to
-        :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join are still apart after them,
-        every point keeps all its neighbours. With ``off_sheet``, a neighbour off the point's smooth sheet
+        neighbourhood; joining them would short-circuit the Laplacian. A star triangle (p, a, b) whose
+        corners a and b both pass that test can still join two sheets through its edge a b, where two parts
+        meet along a crease and p's normal lies between theirs; it is left out when n_a and n_b point apart
+        and still do with n_a carried to b along the circle through both (:func:`_transported_agreement`:
+        the surface does not turn from a to b, as it does round a sharp fold or a thin part). A wrongly
+        oriented normal must not cut the surface itself, hence two safeguards: a point with fewer than two
+        neighbours on its sheet keeps all of them and all its triangles, and a neighbour that the rule leaves
+        in another piece of the triangulation (a patch of flipped normals, cut off along its rim) is given
+        back, the star of a point that the triangle test left in another piece keeps all its triangles, and
+        the stars are rebuilt, for up to :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join
+        are still apart after them, every point keeps all its neighbours and triangles. With ``off_sheet``, a neighbour off the point's smooth sheet
         (:attr:`sheet_offsets`) is on another sheet too, and the rounds give back the neighbours on the
         smooth sheet first (they are the rim of a flipped patch; the others, the gap of a contact). Read-only."""
         return self._sheet_triangulation[0]
@@ -198,8 +204,9 @@ class PointCloud:
         if self.off_sheet is not None:
             smooth = self.sheet_offsets <= self.off_sheet
             same_sheet &= smooth
-        same_sheet[same_sheet.sum(axis=1) < 2] = True
-        faces = self._stars(np.arange(n), neighbours, same_sheet)
+        rims = same_sheet.sum(axis=1) >= 2  # the points whose stars drop triangles joining two sheets
+        same_sheet[~rims] = True
+        faces = self._stars(np.arange(n), neighbours, same_sheet, rims)
         for attempt in range(_REJOIN_ROUNDS + 1):
             edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
             graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
@@ -210,13 +217,15 @@ class PointCloud:
             bridges = apart & ~same_sheet  # neighbours the rule left in another piece
             if self.off_sheet is not None and (bridges & smooth).any():
                 bridges &= smooth  # first those on the point's smooth sheet (a flipped patch's rim)
-            if attempt == _REJOIN_ROUNDS or not bridges.any():  # still apart: no sheets are separated anywhere
+            torn = rims & (apart & same_sheet).any(axis=1)  # stars whose rim test may have cut the piece off
+            if attempt == _REJOIN_ROUNDS or not (bridges.any() or torn.any()):  # no sheets are separated anywhere
                 same_sheet[:] = True
-                faces = self._stars(np.arange(n), neighbours, same_sheet)
+                faces = self._stars(np.arange(n), neighbours, same_sheet, np.zeros(n, dtype=bool))
                 break
             same_sheet |= bridges
-            centers = np.flatnonzero(bridges.any(axis=1))
-            rebuilt = self._stars(centers, neighbours, same_sheet)
+            rims &= ~(torn | bridges.any(axis=1))  # stars joined back keep all their triangles
+            centers = np.flatnonzero(bridges.any(axis=1) | torn)
+            rebuilt = self._stars(centers, neighbours, same_sheet, rims)
             faces = np.vstack([faces[~np.isin(faces[:, 0], centers)], rebuilt])
         faces.flags.writeable = False
         same_sheet.flags.writeable = False
@@ -255,12 +264,18 @@ class PointCloud:
         offsets.flags.writeable = False
         return offsets
 
-    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray) -> np.ndarray:
-        """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks."""
-        return np.vstack([
+    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray, rims: np.ndarray) -> np.ndarray:
+        """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks, less the triangles
+        (p, a, b) of the points p with ``rims[p]`` whose edge a b runs between two sheets
+        (:attr:`local_triangles`)."""
+        faces = np.vstack([
             _delaunay_stars(self._points, self.normals, ids[rows], neighbours[ids[rows]], kept[ids[rows]])
             for rows in _chunks(len(ids), 8 * neighbours.shape[1])
         ])  # fmt: skip
+        a, b = faces[:, 1], faces[:, 2]
+        apart = np.einsum("fc,fc->f", self.normals[a], self.normals[b]) <= 0
+        apart &= _transported_agreement(self._points, self.normals, a, b) <= 0
+        return faces[~(rims[faces[:, 0]] & apart)]
 
     @cached_property
     def area(self) -> float:
