@@ -181,9 +181,10 @@ class PointCloud:
         in another piece of the triangulation (a patch of flipped normals, cut off along its rim) is given
         back, the star of a point that the triangle test left in another piece keeps all its triangles, and
         the stars are rebuilt, for up to :data:`_REJOIN_ROUNDS` rounds; if pieces that the neighbourhoods join
-        are still apart after them, every point keeps all its neighbours and triangles. With ``off_sheet``, a neighbour off the point's smooth sheet
-        (:attr:`sheet_offsets`) is on another sheet too, and the rounds give back the neighbours on the
-        smooth sheet first (they are the rim of a flipped patch; the others, the gap of a contact). Read-only."""
+        are still apart after them, every point keeps all its neighbours and triangles. With ``off_sheet``, a
+        neighbour off the point's smooth sheet (:attr:`sheet_offsets`) is on another sheet too, and the rounds
+        give back the neighbours on the smooth sheet first (they are the rim of a flipped patch; the others,
+        the gap of a contact). Read-only."""
         return self._sheet_triangulation[0]
 
     @property
