@@ -137,7 +137,7 @@ def test_star_triangles_that_join_two_sheets_across_a_crease_are_left_out(turn):
     assert joining(stars) > 10  # measured 14: the sides' normals point apart (130 degrees)
     if turn == "across the line":  # a sharp fold: the surface turns between the two sides, one sheet
         assert joining(cloud.local_triangles) == joining(stars)
-    else:  # normals twisted about the line a rim runs along: two sheets that meet there
+    else:  # normals twisted about the line the far edges run along: two sheets that meet there
         assert joining(cloud.local_triangles) == 0
 
 

@@ -205,9 +205,9 @@ class PointCloud:
         if self.off_sheet is not None:
             smooth = self.sheet_offsets <= self.off_sheet
             same_sheet &= smooth
-        rims = same_sheet.sum(axis=1) >= 2  # the points whose stars drop triangles joining two sheets
-        same_sheet[~rims] = True
-        faces = self._stars(np.arange(n), neighbours, same_sheet, rims)
+        far_edges = same_sheet.sum(axis=1) >= 2  # the points whose stars drop triangles joining two sheets
+        same_sheet[~far_edges] = True
+        faces = self._stars(np.arange(n), neighbours, same_sheet, far_edges)
         for attempt in range(_REJOIN_ROUNDS + 1):
             edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
             graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
@@ -218,15 +218,15 @@ class PointCloud:
             bridges = apart & ~same_sheet  # neighbours the rule left in another piece
             if self.off_sheet is not None and (bridges & smooth).any():
                 bridges &= smooth  # first those on the point's smooth sheet (a flipped patch's rim)
-            torn = rims & (apart & same_sheet).any(axis=1)  # stars whose rim test may have cut the piece off
+            torn = far_edges & (apart & same_sheet).any(axis=1)  # stars whose far-edge test may have cut a piece off
             if attempt == _REJOIN_ROUNDS or not (bridges.any() or torn.any()):  # no sheets are separated anywhere
                 same_sheet[:] = True
                 faces = self._stars(np.arange(n), neighbours, same_sheet, np.zeros(n, dtype=bool))
                 break
             same_sheet |= bridges
-            rims &= ~(torn | bridges.any(axis=1))  # stars joined back keep all their triangles
+            far_edges &= ~(torn | bridges.any(axis=1))  # stars joined back keep all their triangles
             centers = np.flatnonzero(bridges.any(axis=1) | torn)
-            rebuilt = self._stars(centers, neighbours, same_sheet, rims)
+            rebuilt = self._stars(centers, neighbours, same_sheet, far_edges)
             faces = np.vstack([faces[~np.isin(faces[:, 0], centers)], rebuilt])
         faces.flags.writeable = False
         same_sheet.flags.writeable = False
@@ -265,9 +265,9 @@ class PointCloud:
         offsets.flags.writeable = False
         return offsets
 
-    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray, rims: np.ndarray) -> np.ndarray:
+    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray, far_edges: np.ndarray) -> np.ndarray:
         """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks, less the triangles
-        (p, a, b) of the points p with ``rims[p]`` whose edge a b runs between two sheets
+        (p, a, b) of the points p with ``far_edges[p]`` whose edge a b runs between two sheets
         (:attr:`local_triangles`)."""
         faces = np.vstack([
             _delaunay_stars(self._points, self.normals, ids[rows], neighbours[ids[rows]], kept[ids[rows]])
@@ -276,7 +276,7 @@ class PointCloud:
         a, b = faces[:, 1], faces[:, 2]
         apart = np.einsum("fc,fc->f", self.normals[a], self.normals[b]) <= 0
         apart &= _transported_agreement(self._points, self.normals, a, b) <= 0
-        return faces[~(rims[faces[:, 0]] & apart)]
+        return faces[~(far_edges[faces[:, 0]] & apart)]
 
     @cached_property
     def area(self) -> float:
