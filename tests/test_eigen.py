@@ -247,6 +247,35 @@ def test_superlu_and_cholmod_backends_agree(sphere_5k):
         np.testing.assert_allclose(superlu.values, cholmod.values, rtol=1e-10)
 
 
+def test_the_supernodal_kernel_agrees_with_the_simplicial_one_and_restores_the_blas_threads(sphere_5k, monkeypatch):
+    import hamsa.factorization as factorization
+    from hamsa.factorization import CholeskySolver, cholmod_thread_pools
+
+    if not (factorization.HAVE_CHOLMOD and cholmod_thread_pools() is not None):
+        pytest.skip("needs CHOLMOD with an optimized BLAS and threadpoolctl (the supernodal kernel is not used)")
+    V = np.linspace(0, 4, sphere_5k.n_vertices)
+    simplicial = solve(sphere_5k, 16, V, backend="cholmod")
+    before = [pool["num_threads"] for pool in cholmod_thread_pools().info()]
+    monkeypatch.setattr(factorization, "SUPERNODAL_FROM", 0)
+    assert factorization.supernodal(sphere_5k.n_vertices)
+    super_ = solve(sphere_5k, 16, V, backend="cholmod")
+    np.testing.assert_allclose(super_.values, simplicial.values, rtol=1e-10)
+    assert relative_residuals(super_)[1:].max() < 1e-9
+    modes, analyze = [], factorization._cholmod_analyze
+    monkeypatch.setattr(
+        factorization, "_cholmod_analyze", lambda m, **kw: (modes.append(kw["mode"]), analyze(m, **kw))[1]
+    )
+    H, A = hamiltonian(sphere_5k)
+    K = (H + A).tocsc()
+    solver = CholeskySolver(K, "cholmod")
+    assert modes == ["supernodal"]
+    rhs = np.random.default_rng(3).standard_normal((K.shape[0], 3))
+    np.testing.assert_allclose(K @ solver.solve(rhs), rhs, atol=1e-10 * np.abs(rhs).max())
+    solver.refactor((H + 2 * A).tocsc())  # new values, the analysis kept
+    np.testing.assert_allclose((H + 2 * A) @ solver.solve(rhs), rhs, atol=1e-10 * np.abs(rhs).max())
+    assert [pool["num_threads"] for pool in cholmod_thread_pools().info()] == before
+
+
 def test_chebyshev_refuses_a_full_mass_and_cpu_methods_on_the_gpu(small_mesh):
     with pytest.raises(SolverError, match="lumped"):
         hamsa.eigenbasis(small_mesh, 5, mass="full", method="chebyshev")

@@ -11,6 +11,8 @@ if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && ! ls /usr/lib/*/o
         && echo "OpenBLAS installed (the BLAS behind CHOLMOD's supernodal kernels)" \
         || echo "notice: could not install OpenBLAS; CHOLMOD uses the system's default BLAS (hamsa config shows which)"
 fi
+# threadpoolctl: hamsa holds CHOLMOD's BLAS to one thread in the supernodal kernel's solves
+"$BIN/pip" install -q "threadpoolctl>=3" >/dev/null 2>&1 || echo "notice: could not install threadpoolctl; CHOLMOD stays simplicial"
 if "$BIN/python" -c "import sksparse.cholmod" 2>/dev/null; then
     exit 0
 fi

@@ -1,17 +1,24 @@
 """Sparse Cholesky factorizations of symmetric positive definite matrices, reused across solves.
 
-CHOLMOD (scikit-sparse, the ``[fast]`` extra) when it is installed: a simplicial LDL^T factorization
-with a METIS ordering, and a symbolic analysis that is kept when only the values change (a new
-potential changes only the diagonal of H). Inside the Krylov solver (blocks of 8 right-hand sides between
-dense BLAS work) it is as fast as CHOLMOD's supernodal kernel with OpenBLAS at 200k vertices and faster at
-50k, where the supernodal kernel's BLAS threads compete with NumPy's.
+CHOLMOD (scikit-sparse, the ``[fast]`` extra) when it is installed, with a METIS ordering and a symbolic
+analysis that is kept when only the values change (a new potential changes only the diagonal of H). The
+kernel depends on the size: below :data:`SUPERNODAL_FROM` rows a simplicial LDL^T (no BLAS; inside the
+Krylov solver, blocks of 8 right-hand sides between dense BLAS work, it is as fast as the supernodal
+kernel there); from it, when CHOLMOD's BLAS is an optimized one, the supernodal LL^T, whose numeric
+factorization runs on dense BLAS blocks (several times faster on meshes of a million vertices). Its solves
+run with CHOLMOD's BLAS and OpenMP held to one thread (threadpoolctl): NumPy's BLAS threads stay busy on
+the other cores between the solver's dense products, and two thread pools competing for the cores make
+the solves slower, not faster. Without an optimized BLAS behind CHOLMOD (the reference BLAS) or without
+threadpoolctl, the simplicial kernel at every size.
 Without CHOLMOD, SciPy's SuperLU in symmetric mode (minimum degree on A + A^T, diagonal pivoting), with a
 one-time notice saying how to get CHOLMOD.
 """
 
 from __future__ import annotations
 
+import os
 import warnings
+from functools import cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,14 +35,44 @@ except ImportError:  # pragma: no cover - depends on the environment
     HAVE_CHOLMOD = False
 
 BACKENDS = ("auto", "cholmod", "superlu")
+SUPERNODAL_FROM = 100_000  # rows from which CHOLMOD's supernodal kernel is used (with an optimized BLAS)
+# NumPy's and SciPy's own BLAS in their wheels: not the one CHOLMOD calls
+_BUNDLED = (f"{os.sep}numpy.libs{os.sep}", f"{os.sep}scipy.libs{os.sep}", f"{os.sep}scipy_openblas")
+
+
+@cache
+def cholmod_thread_pools():
+    """The threadpoolctl selection of the optimized BLAS and OpenMP libraries CHOLMOD runs on (those not
+    bundled in NumPy's or SciPy's wheels), or None: no threadpoolctl, or no optimized BLAS among them (the
+    reference BLAS, which threadpoolctl does not list, is too slow for the supernodal kernel)."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:
+        return None
+    controller = ThreadpoolController()
+    pools = [
+        pool
+        for pool in controller.info()
+        if pool["user_api"] in ("blas", "openmp") and not any(mark in pool["filepath"] for mark in _BUNDLED)
+    ]
+    if not any(pool["user_api"] == "blas" for pool in pools):
+        return None
+    return controller.select(filepath=[pool["filepath"] for pool in pools])
+
+
+def supernodal(n: int) -> bool:
+    """Whether an n-row factorization uses CHOLMOD's supernodal kernel (see the module docstring)."""
+    return HAVE_CHOLMOD and n >= SUPERNODAL_FROM and cholmod_thread_pools() is not None
 
 
 def _cholmod_symbolic(matrix):
-    """Simplicial LDL^T with a METIS ordering (see the module docstring for why not supernodal)."""
+    """The symbolic analysis with a METIS ordering (AMD when CHOLMOD lacks METIS), simplicial or supernodal
+    by :func:`supernodal`."""
+    mode = "supernodal" if supernodal(matrix.shape[0]) else "simplicial"
     try:
-        return _cholmod_analyze(matrix, mode="simplicial", ordering_method="metis")
+        return _cholmod_analyze(matrix, mode=mode, ordering_method="metis")
     except Exception:  # CHOLMOD built without METIS
-        return _cholmod_analyze(matrix, mode="simplicial", ordering_method="amd")
+        return _cholmod_analyze(matrix, mode=mode, ordering_method="amd")
 
 
 _notified = False
@@ -133,5 +170,8 @@ class CholeskySolver:
         rhs = np.asarray(rhs, dtype=np.float64)
         if self.backend == "cholmod":
             rhs = np.asfortranarray(rhs)
-            return self._factor(rhs)
+            if not supernodal(self.shape[0]):
+                return self._factor(rhs)
+            with cholmod_thread_pools().limit(limits=1):
+                return self._factor(rhs)
         return self._factor.solve(rhs)

@@ -2,9 +2,10 @@
 
 ``hamsa.show_config()`` (and ``hamsa config`` on the command line) prints it; ``configuration()`` returns
 it as a dict for scripts and bug reports. The BLAS matters for CHOLMOD's supernodal kernel (the default
-of ``sksparse.cholmod.cholesky``, e.g. in the eigsh + CHOLMOD baseline; hamsa's own factorization is
-simplicial): Debian's CHOLMOD uses whichever ``libblas.so.3`` the system selects — the slow reference BLAS
-unless an optimized one (e.g. ``libopenblas0-pthread``, which ``make`` installs when it can) is there.
+of ``sksparse.cholmod.cholesky``, e.g. in the eigsh + CHOLMOD baseline, and hamsa's own from
+:data:`hamsa.factorization.SUPERNODAL_FROM` rows): Debian's CHOLMOD uses whichever ``libblas.so.3`` the
+system selects — the slow reference BLAS unless an optimized one (e.g. ``libopenblas0-pthread``, which
+``make`` installs when it can) is there.
 """
 
 from __future__ import annotations
@@ -67,9 +68,7 @@ def configuration() -> dict:
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "numpy_blas": _numpy_blas(),
-        "factorization": "CHOLMOD (scikit-sparse), simplicial LDL^T, METIS ordering"
-        if HAVE_CHOLMOD
-        else "SciPy SuperLU (install hamsa[fast] for CHOLMOD)",
+        "factorization": _factorization(),
     }
     if HAVE_CHOLMOD:
         import sksparse
@@ -88,6 +87,20 @@ def configuration() -> dict:
     } or "not set (the BLAS libraries choose)"
     config["gpu"] = _gpu()
     return config
+
+
+def _factorization() -> str:
+    """The sparse factorization ``backend="auto"`` uses, and its kernel by size."""
+    from hamsa.factorization import HAVE_CHOLMOD, SUPERNODAL_FROM, cholmod_thread_pools
+
+    if not HAVE_CHOLMOD:
+        return "SciPy SuperLU (install hamsa[fast] for CHOLMOD)"
+    if cholmod_thread_pools() is None:
+        return "CHOLMOD (scikit-sparse), simplicial LDL^T, METIS ordering (no optimized BLAS behind it)"
+    return (
+        f"CHOLMOD (scikit-sparse), METIS ordering: simplicial LDL^T below {SUPERNODAL_FROM:,} rows, "
+        "supernodal LL^T from there (its solves on one BLAS thread)"
+    )
 
 
 def _gpu() -> str:
