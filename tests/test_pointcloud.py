@@ -58,7 +58,9 @@ def test_nearly_touching_parts_are_not_joined_when_sheets_are_separated():
     on_mesh = hamsa.eigenbasis(mesh, 11).values[1:]
     separated = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 11).values[1:]
     joined = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, separate_sheets=False), 11).values[1:]
-    assert np.max(np.abs(separated / on_mesh - 1)) < 0.08  # measured 0.066
+    # measured 0.083 (0.066 with the PCA normals: with the stars' normals the thin fingers' far sides leave
+    # more stars, and the cloud's eigenvalues sit a few percent below the mesh's throughout)
+    assert np.max(np.abs(separated / on_mesh - 1)) < 0.1
     assert np.max(np.abs(joined / on_mesh - 1)) > 0.3  # robust_laplacian's short circuits: measured 0.64
 
 
@@ -88,6 +90,7 @@ def test_sheet_offsets_are_the_distances_from_the_points_own_plane():
     sparse = np.stack(np.meshgrid(np.arange(0.0, 20.0, 2.0), np.arange(0.0, 20.0, 2.0)), axis=-1).reshape(-1, 2)
     upper = np.column_stack([sparse + 0.5, np.full(len(sparse), 0.9)])  # a parallel sheet 0.9 above, sparser
     cloud = hamsa.PointCloud(np.vstack([lower, upper]), off_sheet=0.7)
+    cloud.__dict__["normals"] = np.tile([0.0, 0.0, 1.0], (len(cloud.points), 1))  # the sheets' own
     distances, indices = cloud._neighbourhoods
     inner = np.flatnonzero(np.all(np.abs(grid - 9.5) < 5, axis=1))  # whole neighbourhoods on both sheets
     others = indices[inner, 1:] >= len(grid)
@@ -101,7 +104,7 @@ def test_sheet_offsets_are_the_distances_from_the_points_own_plane():
 
 
 @pytest.mark.data
-def test_off_sheet_separates_wide_contacts_where_the_normals_fail():
+def test_off_sheet_separates_wide_contacts_that_the_normals_miss():
     from conftest import data_mesh
 
     mesh = data_mesh("tosca_hires/meshes/michael1.off.gz").scaled_to_unit_area()  # hands on the thighs
@@ -110,8 +113,8 @@ def test_off_sheet_separates_wide_contacts_where_the_normals_fail():
     for off_sheet in (None, 0.7):
         cloud = hamsa.PointCloud(mesh.vertices, off_sheet=off_sheet)
         errors[off_sheet] = np.abs(hamsa.eigenbasis(cloud, 11).values[1:] / on_mesh - 1)
-    assert errors[None].max() > 0.4  # measured 0.665: short circuits where the normals' signs fail
-    assert errors[0.7].max() < 0.15  # measured 0.087
+    assert errors[None].max() > 0.1  # measured 0.128 (0.665 with the PCA normals): short circuits stay
+    assert errors[0.7].max() < 0.06  # measured 0.039
 
 
 @pytest.mark.parametrize("turn", ["across the line", "about the line"])
@@ -364,6 +367,27 @@ def test_cloud_normals_point_outward_and_agree_with_the_mesh(humanoid_pair):
     assert (np.einsum("ij,ij->i", many.normals, np.tile(ball, (60, 1))) > 0.99).all()
 
 
+@pytest.mark.data
+def test_star_normals_are_closer_to_the_mesh_than_the_fitted_planes(monkeypatch):
+    import hamsa.pointcloud as pointcloud
+
+    from conftest import data_mesh
+
+    mesh = data_mesh("tosca_hires/meshes/dog1.off.gz")  # thin legs and a tail, legs that nearly touch
+    outward = mesh.vertex_normals * np.sign(mesh.signed_volume)
+
+    def angles_and_wrong_signs(rounds):
+        monkeypatch.setattr(pointcloud, "_NORMAL_ROUNDS", rounds)
+        agreement = np.einsum("ij,ij->i", hamsa.PointCloud(mesh.vertices).normals, outward)
+        return np.degrees(np.arccos(np.minimum(np.abs(agreement), 1.0))), np.mean(agreement < 0)
+
+    stars, stars_wrong = angles_and_wrong_signs(pointcloud._NORMAL_ROUNDS)
+    planes, planes_wrong = angles_and_wrong_signs(0)  # the PCA planes, oriented
+    # measured: median 5.7 -> 1.6 degrees, 90th percentile 26.8 -> 27.3, wrong signs 29.3% -> 4.9%
+    assert np.median(stars) < 0.5 * np.median(planes)
+    assert stars_wrong < 0.1 < 0.2 < planes_wrong
+
+
 def test_cloud_gradients_converge_to_the_tangential_gradient():
     errors = []
     for level in (3, 4, 5):
@@ -398,7 +422,7 @@ def test_normals_and_gradients_in_memory_bounded_chunks_equal_the_whole_computat
     chunked = hamsa.PointCloud(points)
     np.testing.assert_array_equal(chunked.normals, normals)
     np.testing.assert_allclose((chunked.gradient_matrix - gradient).toarray(), 0.0, atol=1e-12)
-    assert len(sizes) == 2 and all(sum(s) == len(points) and max(s) == 7 and min(s) >= 1 for s in sizes)
+    assert len(sizes) > 2 and all(sum(s) == len(points) and max(s) == 7 and min(s) >= 1 for s in sizes)
 
 
 def test_cloud_orientation_operator_follows_the_mesh_operator_and_flips_with_a_mirror_image(humanoid_pair):

@@ -39,6 +39,7 @@ from hamsa.mesh import TriMesh, as_coordinates, as_trimesh, check_coordinates, f
 DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
 # nearest points of the least-squares gradient and of the normals' orientation graph
 GRADIENT_NEIGHBORS = 10
+_NORMAL_ROUNDS = 2  # rounds of re-estimating the normals from the local triangulation's stars
 _REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
 _FIT_ROUNDS = 8  # reweighting rounds of the robust quadratic fit of a point's sheet (``off_sheet``)
 
@@ -200,14 +201,23 @@ class PointCloud:
     def _sheet_triangulation(self) -> tuple[np.ndarray, np.ndarray]:
         """(faces (f, 3), same_sheet (n, neighbors) bool): :attr:`local_triangles` and which neighbours its
         stars were built from."""
+        smooth = None if self.off_sheet is None else self.sheet_offsets <= self.off_sheet
+        faces, same_sheet = self._triangulate(self.normals, smooth)
+        faces.flags.writeable = False
+        same_sheet.flags.writeable = False
+        return faces, same_sheet
+
+    def _triangulate(self, normals: np.ndarray, smooth: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """(faces (f, 3), same_sheet (n, neighbors) bool): the sheet rule of :attr:`local_triangles` with the
+        unit normals ``normals`` (n, 3), and with ``smooth`` (n, neighbors) bool, which neighbours lie on the
+        point's smooth sheet (``off_sheet``), or None."""
         n, neighbours = self.n_vertices, self._neighbourhoods[1][:, 1:]
-        same_sheet = np.einsum("nc,nkc->nk", self.normals, self.normals[neighbours]) > 0
-        if self.off_sheet is not None:
-            smooth = self.sheet_offsets <= self.off_sheet
+        same_sheet = np.einsum("nc,nkc->nk", normals, normals[neighbours]) > 0
+        if smooth is not None:
             same_sheet &= smooth
         far_edges = same_sheet.sum(axis=1) >= 2  # the points whose stars drop triangles joining two sheets
         same_sheet[~far_edges] = True
-        faces = self._stars(np.arange(n), neighbours, same_sheet, far_edges)
+        faces = self._stars(normals, np.arange(n), neighbours, same_sheet, far_edges)
         for attempt in range(_REJOIN_ROUNDS + 1):
             edges = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [0, 2]]])
             graph = sp.csr_matrix((np.ones(len(edges)), edges.T), shape=(n, n))
@@ -216,20 +226,18 @@ class PointCloud:
             if not apart.any():
                 break
             bridges = apart & ~same_sheet  # neighbours the rule left in another piece
-            if self.off_sheet is not None and (bridges & smooth).any():
+            if smooth is not None and (bridges & smooth).any():
                 bridges &= smooth  # first those on the point's smooth sheet (a flipped patch's rim)
             torn = far_edges & (apart & same_sheet).any(axis=1)  # stars whose far-edge test may have cut a piece off
             if attempt == _REJOIN_ROUNDS or not (bridges.any() or torn.any()):  # no sheets are separated anywhere
                 same_sheet[:] = True
-                faces = self._stars(np.arange(n), neighbours, same_sheet, np.zeros(n, dtype=bool))
+                faces = self._stars(normals, np.arange(n), neighbours, same_sheet, np.zeros(n, dtype=bool))
                 break
             same_sheet |= bridges
             far_edges &= ~(torn | bridges.any(axis=1))  # stars joined back keep all their triangles
             centers = np.flatnonzero(bridges.any(axis=1) | torn)
-            rebuilt = self._stars(centers, neighbours, same_sheet, far_edges)
+            rebuilt = self._stars(normals, centers, neighbours, same_sheet, far_edges)
             faces = np.vstack([faces[~np.isin(faces[:, 0], centers)], rebuilt])
-        faces.flags.writeable = False
-        same_sheet.flags.writeable = False
         return faces, same_sheet
 
     @cached_property
@@ -265,17 +273,17 @@ class PointCloud:
         offsets.flags.writeable = False
         return offsets
 
-    def _stars(self, ids: np.ndarray, neighbours: np.ndarray, kept: np.ndarray, far_edges: np.ndarray) -> np.ndarray:
-        """The :func:`_delaunay_stars` of the points ``ids``, in memory-bounded chunks, less the triangles
-        (p, a, b) of the points p with ``far_edges[p]`` whose edge a b runs between two sheets
-        (:attr:`local_triangles`)."""
+    def _stars(self, normals, ids, neighbours, kept, far_edges) -> np.ndarray:
+        """The :func:`_delaunay_stars` of the points ``ids`` with the unit normals ``normals`` (n, 3), in
+        memory-bounded chunks, less the triangles (p, a, b) of the points p with ``far_edges[p]`` whose edge
+        a b runs between two sheets (:attr:`local_triangles`)."""
         faces = np.vstack([
-            _delaunay_stars(self._points, self.normals, ids[rows], neighbours[ids[rows]], kept[ids[rows]])
+            _delaunay_stars(self._points, normals, ids[rows], neighbours[ids[rows]], kept[ids[rows]])
             for rows in _chunks(len(ids), 8 * neighbours.shape[1])
         ])  # fmt: skip
         a, b = faces[:, 1], faces[:, 2]
-        apart = np.einsum("fc,fc->f", self.normals[a], self.normals[b]) <= 0
-        apart &= _transported_agreement(self._points, self.normals, a, b) <= 0
+        apart = np.einsum("fc,fc->f", normals[a], normals[b]) <= 0
+        apart &= _transported_agreement(self._points, normals, a, b) <= 0
         return faces[~(far_edges[faces[:, 0]] & apart)]
 
     @cached_property
@@ -311,39 +319,28 @@ class PointCloud:
     def normals(self) -> np.ndarray:
         """(n, 3) unit normals, consistently oriented and pointing outward (read-only).
 
-        Each is the direction of least variance of the point and its ``neighbors // 2`` nearest points (at
-        least :data:`GRADIENT_NEIGHBORS`; PCA): half the triangulation's neighbourhood, wide enough to
-        average out sampling noise and narrow enough not to reach across sheets that nearly touch. Signs are
-        made consistent along a minimum spanning tree of the graph of each point's
-        :data:`GRADIENT_NEIGHBORS` nearest points (Hoppe et al. 1992), weighted by
-        ``(1 - |t_ij| + 1e-3) x distance`` where t_ij compares n_j with n_i carried to point j along the
-        circle through both points (König & Gumhold 2009; :func:`_transported_agreement`): the sign
-        travels where that comparison is clearest first, and it crosses the gap between two nearly
-        touching parts, or a thin part, reversed (facing sides point apart) instead of copied. Then each
-        piece of that graph is flipped so that ``sum n . (p - centroid) > 0`` (3 x the enclosed volume, by
-        the divergence theorem: outward on a closed piece). Where parts are thinner than the point spacing
-        or touch over a wide area some points can still get the wrong sign, mostly in patches on legs,
-        tails, ears and at the contacts."""
+        First each is the direction of least variance of the point and its ``neighbors // 2`` nearest
+        points (at least :data:`GRADIENT_NEIGHBORS`; PCA), oriented by :func:`_oriented`. Where two parts
+        nearly touch or meet at an angle, or a part is thinner than that neighbourhood, the PCA plane
+        averages over both sides and tilts; so, :data:`_NORMAL_ROUNDS` times, each normal is replaced by the
+        area-weighted mean normal of the point's star in the local triangulation these normals give
+        (:attr:`local_triangles`, without ``off_sheet``: only the neighbours on the point's own sheet, as a
+        mesh's vertex normal averages its faces) and the signs are oriented again, which the better
+        directions make clearer. Where parts are thinner than the point spacing or touch over a wide area
+        some points can still get the wrong sign, mostly in patches on legs, tails, ears and at the
+        contacts, and where a star still joins two sheets its normal tilts toward the other one."""
         distances, indices = self._neighbourhoods
         n = self.n_vertices
         fitted = 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)  # the point and its nearest ones
-        normals = np.empty((n, 3))
+        directions = np.empty((n, 3))
         for rows in _chunks(n, indices.shape[1] * 3):  # (chunk, neighbors + 1, 3) at a time: bounded memory
             neighbourhood = self._points[indices[rows, :fitted]]
             spread = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
-            normals[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
-        rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
-        columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
-        alignment = np.abs(_transported_agreement(self._points, normals, rows, columns))
-        weights = (1.0 - alignment + 1e-3) * distances[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
-        graph = sp.csr_matrix((weights, (rows, columns)), shape=(n, n))
-        tree = minimum_spanning_tree(graph.maximum(graph.T))
-        count, labels = connected_components(tree, directed=False)
-        normals[_flips_along_forest(tree, self._points, normals, labels, count)] *= -1
-        pieces = np.bincount(labels, minlength=count)[:, None]
-        centroids = np.stack([np.bincount(labels, self._points[:, d], count) for d in range(3)], axis=1) / pieces
-        volumes = np.bincount(labels, np.einsum("ij,ij->i", normals, self._points - centroids[labels]), count)
-        normals[volumes[labels] < 0] *= -1
+            directions[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
+        normals = _oriented(self._points, directions, distances, indices)
+        for _ in range(_NORMAL_ROUNDS):
+            stars = self._triangulate(normals, None)[0]
+            normals = _oriented(self._points, _star_normals(self._points, stars, normals), distances, indices)
         normals.flags.writeable = False
         return normals
 
@@ -428,6 +425,46 @@ def _transported_agreement(points, normals, rows, columns) -> np.ndarray:
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     p, q = normals[rows], normals[columns]
     return np.einsum("ij,ij->i", q, p) - 2 * np.einsum("ij,ij->i", p, e) * np.einsum("ij,ij->i", q, e)
+
+
+def _oriented(points: np.ndarray, directions: np.ndarray, distances: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """(n, 3): the unit normal directions (n, 3) with their signs made consistent and outward.
+
+    Signs travel along a minimum spanning tree of the graph of each point's :data:`GRADIENT_NEIGHBORS`
+    nearest points (``indices`` and ``distances`` (n, k + 1), the point itself first; Hoppe et al. 1992),
+    weighted by ``(1 - |t_ij| + 1e-3) x distance`` where t_ij compares n_j with n_i carried to point j
+    along the circle through both points (König & Gumhold 2009; :func:`_transported_agreement`): the sign
+    travels where that comparison is clearest first, and it crosses the gap between two nearly touching
+    parts, or a thin part, reversed (facing sides point apart) instead of copied. Then each piece of that
+    graph is flipped so that ``sum n . (p - centroid) > 0`` (3 x the enclosed volume, by the divergence
+    theorem: outward on a closed piece)."""
+    n = len(points)
+    normals = directions.copy()
+    rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
+    columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
+    alignment = np.abs(_transported_agreement(points, normals, rows, columns))
+    weights = (1.0 - alignment + 1e-3) * distances[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
+    graph = sp.csr_matrix((weights, (rows, columns)), shape=(n, n))
+    tree = minimum_spanning_tree(graph.maximum(graph.T))
+    count, labels = connected_components(tree, directed=False)
+    normals[_flips_along_forest(tree, points, normals, labels, count)] *= -1
+    pieces = np.bincount(labels, minlength=count)[:, None]
+    centroids = np.stack([np.bincount(labels, points[:, d], count) for d in range(3)], axis=1) / pieces
+    volumes = np.bincount(labels, np.einsum("ij,ij->i", normals, points - centroids[labels]), count)
+    normals[volumes[labels] < 0] *= -1
+    return normals
+
+
+def _star_normals(points: np.ndarray, stars: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(n, 3) unit normals: at each point p the sum of the normals of the triangles (p, a, b) of its star
+    (``stars`` (f, 3), the star's point first), each of length twice the triangle's area and turned to the
+    side of ``normals[p]``; a point without triangles keeps ``normals[p]``."""
+    first, second, third = (points[stars[:, i]] for i in range(3))
+    faces = np.cross(second - first, third - first)
+    faces *= np.where(np.einsum("fc,fc->f", faces, normals[stars[:, 0]]) < 0, -1.0, 1.0)[:, None]
+    summed = np.stack([np.bincount(stars[:, 0], faces[:, d], len(points)) for d in range(3)], axis=1)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    return np.where(length > 0, summed / np.where(length > 0, length, 1.0), normals)
 
 
 def _flips_along_forest(
