@@ -24,6 +24,7 @@ within 0.05) of the same method and basis on the mesh.
         [--jobs 2] [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
     python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
     python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
+    python benchmarks/point_clouds.py --build 50000 200000         # the operators' cost against robust_laplacian
 """
 
 from __future__ import annotations
@@ -141,6 +142,30 @@ def sign_errors(dataset, source_name: str, target_name: str, k: int = 100) -> di
     return counts
 
 
+def build_seconds(points: np.ndarray, repeats: int = 3) -> dict:
+    """Median (wall, CPU) seconds over ``repeats`` builds of the operators of the cloud ``points``, BLAS on one
+    thread: hamsa's :class:`hamsa.PointCloud` by stage (``normals``, ``local triangles``, ``operators`` from
+    them) and in all, and robust_laplacian's ``point_cloud_laplacian`` (the same 30 neighbours, sheets joined)."""
+    import robust_laplacian
+    from threadpoolctl import threadpool_limits
+
+    stages = ("normals", "local triangles", "operators", "hamsa", "robust_laplacian")
+    times = {stage: [] for stage in stages}
+    with threadpool_limits(limits=1):
+        for _ in range(repeats):
+            cloud = hamsa.PointCloud(points)
+            clocks = [(time.perf_counter(), time.process_time())]
+            for stage in ("normals", "local_triangles", "operators"):
+                getattr(cloud, stage)
+                clocks.append((time.perf_counter(), time.process_time()))
+            robust_laplacian.point_cloud_laplacian(points, n_neighbors=hamsa.pointcloud.DEFAULT_NEIGHBORS)
+            clocks.append((time.perf_counter(), time.process_time()))
+            spans = np.diff(np.array(clocks), axis=0)
+            for stage, span in zip(stages, [*spans[:3], spans[:3].sum(axis=0), spans[3]]):
+                times[stage].append(span)
+    return {stage: tuple(np.median(np.array(values), axis=0)) for stage, values in times.items()}
+
+
 def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
     """The markdown table of pair means and the list of bar failures."""
     lines = [
@@ -212,8 +237,29 @@ def main(argv=None) -> int:
         help="instead of matching: the wrong signs of the matching potential's functions chosen without ground "
         "truth on these pairs (e.g. mesh000:mesh004 cat0:cat1), meshes and clouds, moments alone and with chirality",
     )
+    parser.add_argument(
+        "--build",
+        nargs="+",
+        type=int,
+        metavar="N",
+        help="instead of matching: the seconds of building the operators of N sphere samples (and of TOSCA "
+        "david0's vertices when the data is there), hamsa's stages against robust_laplacian's point-cloud Laplacian",
+    )
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
+    if args.build:
+        clouds = {f"sphere {n}": hamsa.shapes.sphere(n).vertices for n in args.build}
+        if DATA.is_dir():
+            clouds["TOSCA david0"] = load_tosca(DATA / "tosca_hires").load("david0")[0].vertices
+        print(f"hamsa {hamsa.__version__}, one BLAS thread, median of 3 builds: wall / CPU seconds")
+        print("| cloud | normals | local triangles | operators | hamsa | robust_laplacian | ratio (wall) |")
+        print("|---|---|---|---|---|---|---|")
+        for label, points in clouds.items():
+            seconds = build_seconds(points)
+            cells = " | ".join(f"{wall:.2f} / {cpu:.2f}" for wall, cpu in seconds.values())
+            ratio = seconds["hamsa"][0] / seconds["robust_laplacian"][0]
+            print(f"| {label} | {cells} | {ratio:.2f} |", flush=True)
+        return 0
     if not DATA.is_dir():
         print(f"needs the shared datasets at {DATA}")
         return 1

@@ -53,6 +53,33 @@ def test_local_triangles_are_the_delaunay_stars_of_the_projected_neighbourhoods(
     assert sorted(map(tuple, found.tolist())) == sorted(expected)
 
 
+def test_delaunay_stars_on_a_regular_grid_have_empty_circumcircles_and_close_round_inner_points():
+    from hamsa.pointcloud import _delaunay_stars
+
+    grid = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), axis=-1).reshape(-1, 2)
+    points = np.column_stack([grid, np.zeros(len(grid))])  # four cocircular points everywhere, rays of many
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    neighbours = cKDTree(points).query(points, 31)[1][:, 1:]
+    kept = np.random.default_rng(4).random(neighbours.shape) > 0.5
+    faces = _delaunay_stars(points, normals, np.arange(len(points)), neighbours, kept)
+    a, b = points[faces[:, 1], :2] - points[faces[:, 0], :2], points[faces[:, 2], :2] - points[faces[:, 0], :2]
+    assert np.all(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] > 0)  # counterclockwise, none degenerate
+    rhs = np.stack([np.sum(a * a, axis=1), np.sum(b * b, axis=1)], axis=1) / 2
+    centres = np.linalg.solve(np.stack([a, b], axis=1), rhs[..., None])[..., 0]  # circumcentres, p at 0
+    others = points[neighbours[faces[:, 0]], :2] - points[faces[:, 0], None, :2]
+    inside = np.sum((others - centres[:, None]) ** 2, axis=2) < np.sum(centres**2, axis=1)[:, None] * (1 - 1e-9)
+    assert not (inside & kept[faces[:, 0]]).any()  # Delaunay: no kept neighbour inside a circumcircle
+    angles = np.arccos(np.clip(np.sum(a * b, axis=1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1), -1, 1))
+    turned = np.bincount(faces[:, 0], angles, len(points))
+    around = np.zeros(len(points), dtype=bool)  # the kept neighbours surround p: no angular gap of pi or more
+    for i in range(len(points)):
+        offsets = points[neighbours[i, kept[i]], :2] - points[i, :2]
+        t = np.sort(np.arctan2(offsets[:, 1], offsets[:, 0]))
+        around[i] = len(t) > 2 and np.max(np.diff(np.r_[t, t[0] + 2 * np.pi])) < np.pi - 1e-9
+    assert around.sum() > 100
+    assert np.allclose(turned[around], 2 * np.pi)  # the stars of surrounded points close, without overlap
+
+
 def test_nearly_touching_parts_are_not_joined_when_sheets_are_separated():
     mesh = hamsa.shapes.hand("curled").scaled_to_unit_area()  # fingertips curled onto the palm
     on_mesh = hamsa.eigenbasis(mesh, 11).values[1:]

@@ -492,41 +492,73 @@ def _flips_along_forest(
 
 def _delaunay_stars(points, normals, rows, neighbours, kept) -> np.ndarray:
     """(f, 3) triangles (p, a, b): the Delaunay star of each point p of ``rows`` among its ``kept``
-    neighbours (both (r, m)), projected on its tangent plane (normal ``normals[p]``).
+    neighbours (both (r, m)), projected on its tangent plane (normal ``normals[p]``), a and b in
+    counterclockwise order about the normal.
 
     Under the inversion w = u / |u|^2 of the tangent coordinates u about p, the circles through p become
     lines and their insides the half-planes away from p, so (p, a, b) is a Delaunay triangle (its
     circumcircle empty) exactly when w_a w_b is an edge of the convex hull of the w with p on its inner
-    side. The hulls are found by gift wrapping, vectorized over the points: at most m steps."""
+    side. The inversion keeps the angles about p, so the w sorted by angle form a polygon star-shaped from
+    p, whose hull a Graham scan from a hull vertex finds (Sklansky's scan, correct on star-shaped
+    polygons): pop the top of the stack while it and the next vertex make no left turn. With p inside the
+    hull the scan starts at the largest |w| and closes the loop; with p outside it or on it (an angular gap
+    of at least pi between neighbours: p on the border of its neighbourhood) it runs from one side of the
+    gap to the other, leaving out the edge across it. A point behind a nearer one on the same ray from p
+    lies inside the hull and is dropped first (on a regular grid many do). Vectorized over the points: m
+    steps, each popping only where a pop is due."""
     r, m = neighbours.shape
-    normal = normals[rows]
-    frame = _tangent_frames(normal)
-    u = np.einsum("nkc,nac->nka", points[neighbours] - points[rows, None, :], frame)
+    u = (points[neighbours] - points[rows, None, :]) @ _tangent_frames(normals[rows]).transpose(0, 2, 1)
     squared = np.einsum("nka,nka->nk", u, u)
-    kept = kept & (squared > 0)
-    w = u / np.where(squared > 0, squared, 1.0)[:, :, None]
-    local = np.arange(r)
-    start = np.argmax(np.where(kept, 1.0 / np.where(squared > 0, squared, 1.0), -1.0), axis=1)  # the largest |w|
-    current = start
-    direction = np.stack([-w[local, start, 1], w[local, start, 0]], axis=1)  # the hull runs counterclockwise
-    active = kept.sum(axis=1) >= 2
-    faces = []
-    for _ in range(m):
-        step = w - w[local, current][:, None, :]
-        turn = np.arctan2(direction[:, None, 0] * step[:, :, 1] - direction[:, None, 1] * step[:, :, 0],
-                          np.einsum("na,nka->nk", direction, step))  # fmt: skip
-        turn = np.where(kept & (np.einsum("nka,nka->nk", step, step) > 0), np.mod(turn, 2 * np.pi), np.inf)
-        following = np.argmin(turn, axis=1)
-        edge = w[local, following] - w[local, current]
-        inner = edge[:, 1] * w[local, current, 0] - edge[:, 0] * w[local, current, 1] > 0  # p left of the edge
-        take = active & inner & np.isfinite(turn[local, following])
-        faces.append(np.stack([rows[take], neighbours[take, current[take]], neighbours[take, following[take]]], axis=1))
-        direction = edge
-        current = np.where(active, following, current)
-        active = active & (following != start)
-        if not active.any():
+    angle = np.arctan2(u[..., 1], u[..., 0])
+    angle = np.where(kept & (squared > 0), np.where(angle >= np.pi, -np.pi, angle), np.inf)  # one per ray
+    order = np.lexsort((squared, angle), axis=1)  # by angle, the nearest first on a ray
+    angle = np.take_along_axis(angle, order, axis=1)
+    hidden = ~np.isfinite(angle)
+    hidden[:, 1:] |= angle[:, 1:] == angle[:, :-1]  # behind a nearer point on its ray
+    compact = np.argsort(hidden, axis=1, kind="stable")  # the visible ones first, still by angle
+    order, angle = np.take_along_axis(order, compact, axis=1), np.take_along_axis(angle, compact, axis=1)
+    count = m - hidden.sum(axis=1)
+    size, local, position = np.maximum(count, 1), np.arange(r), np.arange(m)
+    visible = position < count[:, None]
+    angle = np.where(visible, angle, 0.0)
+    gap = np.mod(np.take_along_axis(angle, (position + 1) % size[:, None], axis=1) - angle, 2 * np.pi)
+    widest = np.argmax(np.where(visible, gap, -1.0), axis=1)
+    chain = gap[local, widest] >= np.pi  # p outside the hull or on it: an open chain across the gap
+    squared = np.take_along_axis(squared, order, axis=1)
+    first = np.where(chain, (widest + 1) % size, np.argmax(np.where(visible, -squared, -np.inf), axis=1))
+    steps = np.where(chain, count - 1, count) * (count >= 2)  # a closed hull returns to its first vertex
+    w = np.take_along_axis(u, order[..., None], axis=1) / np.where(squared > 0, squared, 1.0)[..., None]
+    x, y = w[..., 0].ravel(), w[..., 1].ravel()
+    base = local * m
+    stack = np.zeros((r, m + 1), dtype=np.int64)  # per point, the hull so far: positions in the angular order
+    stack[:, 0] = first
+    top = np.zeros(r, dtype=np.int64)
+    flat = stack.ravel()
+    below_x, below_y = np.zeros(r), np.zeros(r)  # the w of the stack's second entry
+    top_x, top_y = x[base + first], y[base + first]  # and of its top
+    for step in range(1, m + 1):
+        live = step <= steps
+        if not live.any():
             break
-    return np.vstack(faces)
+        following = (first + step) % size
+        next_x, next_y = x[base + following], y[base + following]
+        popping = np.flatnonzero(live & (top >= 1))
+        while popping.size:
+            i = popping
+            turn = (top_x[i] - below_x[i]) * (next_y[i] - top_y[i]) - (top_y[i] - below_y[i]) * (next_x[i] - top_x[i])
+            i = i[turn <= 0]
+            top[i] -= 1
+            top_x[i], top_y[i] = below_x[i], below_y[i]
+            popping = i = i[top[i] >= 1]
+            under = base[i] + flat[i * (m + 1) + top[i] - 1]
+            below_x[i], below_y[i] = x[under], y[under]
+        top += live
+        flat[(local * (m + 1) + top)[live]] = following[live]
+        below_x, below_y = np.where(live, top_x, below_x), np.where(live, top_y, below_y)
+        top_x, top_y = np.where(live, next_x, top_x), np.where(live, next_y, top_y)
+    star, at = np.nonzero(position < top[:, None])
+    ids = np.take_along_axis(neighbours, order, axis=1)
+    return np.stack([rows[star], ids[star, stack[star, at]], ids[star, stack[star, at + 1]]], axis=1)
 
 
 def _chunks(n: int, values_per_row: int, budget: int = 2**23):
