@@ -5,7 +5,7 @@ eigenfunction signs made consistent across the two shapes; it gives neither mu n
 found. For mesh000 against a few other SCAPE poses (unit area, k = 100, 1000 sampled vertices, Kim et al.
 errors without symmetries) this prints the HKS nearest-neighbour AUC on [0, 0.25] for the LBO and for
 the Hamiltonian at each mu (signs from the ground truth), then at mu = 1 with signs found without the
-ground truth (:func:`hamsa.matching.resolve_signs_without_truth`: HKS moments and the surfaces'
+ground truth (:func:`hamsa.matching.resolve_signs_without_truth`: intrinsic moments and the surfaces'
 orientation), and how often those signs agree with the true ones.
 
     python benchmarks/matching_potential.py [--pairs 1 5 20 30 40] [--mu 0.1 0.3 1 3 10 100]

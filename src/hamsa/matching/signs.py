@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -30,40 +32,53 @@ def resolve_signs(source: Eigenbasis, target: Eigenbasis, map_source_to_target, 
 
 
 def resolve_signs_without_truth(
-    source: Eigenbasis, target: Eigenbasis, indices, meshes=None, scales: int = 6
+    source: Eigenbasis, target: Eigenbasis, indices, meshes=None, scales: int = 6, squares: int = 10
 ) -> np.ndarray:
     """Signs s_j for the target eigenfunctions j in ``indices`` from the shapes alone (no ground truth).
 
-    Each function gets a feature vector on each shape that flips with its sign, and
-    ``s_j = sign(<f_j^source, f_j^target>)``:
+    Each decision compares features that flip with the signs on the two shapes by the cosine
+    ``<f^source, f^target> / (|f^source| |f^target|)`` of each block of features, so that no block outweighs
+    another by its units. The features integrate the functions, scaled to unit mean square
+    (``phi~ = phi sqrt(area)``), against sign-free weights g: the scaled heat kernel signature h_t at
+    ``scales`` times (:func:`~hamsa.diffusion.default_hks_times` of the source, in units of each shape's
+    area, so that a scaled copy gets the same features) and the squares phi~_c^2 of the functions
+    c = 1..``squares``. They correspond between near-isometric shapes whose functions correspond in order
+    (no swap of near-equal eigenvalues).
 
-    - **moments** ``int h_t psi_j dA`` against the scaled heat kernel signature h_t (normalized to mean 1)
-      at ``scales`` times (:func:`~hamsa.diffusion.default_hks_times` of the source). The HKS does not
-      depend on signs, so these moments correspond between near-isometric shapes; they vanish for a
-      function that an intrinsic left-right symmetry reverses (psi_j o T = -psi_j), because h_t is
-      symmetric.
-    - with ``meshes`` (the two shapes), **chirality** ``det(n_t, n_u, x_j)`` for pairs of times t < u, with
-      ``n_t = int h_t N dA`` (the HKS-weighted outward normal) and ``x_j = int psi_j (X - X_mean) dA`` (the
-      function's first moment in space), each vector normalized. The determinant is unchanged by
-      rotations, translations and scaling and reverses under a reflection, so it tells an antisymmetric
-      function from its mirror image — which no intrinsic quantity can — and it is largest exactly where
-      the moments vanish. On two triangle meshes N is the unit vertex normal, the faces oriented
-      consistently and outward (positive signed volume). Where either shape is a
-      :class:`~hamsa.PointCloud`, N is the mean curvature normal ``kappa N = -Laplace X`` on both, so
-      ``n_t = X^T W h_t`` (W the stiffness of :func:`hamsa.operators.laplacian_operators`): it needs no
-      normal's sign. A cloud's estimated normals get their signs wrong at a few points, mostly at the
-      extremities where h_t is largest, and the unit normals' integral, which nearly cancels over a
-      closed surface, turns with them.
+    The source's intrinsic symmetry (:func:`intrinsic_symmetry_signs`) sorts the functions:
 
-    Like :func:`resolve_signs` it assumes the functions correspond in order (no swap of near-equal
-    eigenvalues) and shapes posed alike up to a rigid motion; a reflected scan gives the mirrored signs.
+    - a function the symmetry **keeps** gets its sign from its **first moments** ``int g phi~_j dA / area``
+      (a block of heat weights and a block of squares);
+    - a function it **reverses** (phi_j o T = -phi_j) has first moments that vanish, since g is symmetric,
+      and no intrinsic quantity tells it from its mirror image. Among the reversed functions the
+      **relative** signs are intrinsic: the products ``phi~_a phi~_b`` are symmetric, and their moments
+      ``int g phi~_a phi~_b dA / area`` (heat and squares blocks) and triple products
+      ``int phi~_a phi~_b s_c phi~_c dA / area`` with the kept functions c give s_a s_b. The relative signs
+      maximize the summed evidence over all patterns; one common **mirror** choice then flips all of them
+      together, by the two **orientation** terms below with ``meshes``, or else by their first moments
+      (which only an asymmetry of the shapes can set: without the surfaces a mirror image cannot be told).
+
+    Both orientation terms reverse under a reflection. The **chirality** of a function is
+    ``det(n_t, n_u, x_j)`` for pairs of times t < u, with ``n_t = int h_t N dA`` (the HKS-weighted normal)
+    and ``x_j = int phi_j (X - X_mean) dA`` (its first moment in space), each vector normalized: unchanged by
+    rigid motions and scaling, but it compares the two poses. The **rotated gradient moments**
+    ``int h_t (N x grad h_u) . grad phi_j dA`` (t < u; the integrand of
+    :func:`~hamsa.matching.functional.orientation_operator`) are intrinsic but for the side N is on, so they
+    do not depend on the pose. On a triangle mesh N is the unit normal, the faces oriented consistently and
+    outward (positive signed volume; a sheet with a large boundary keeps its faces' side). Where either shape
+    is a :class:`~hamsa.PointCloud` the chirality's N is the mean curvature normal ``kappa N = -Laplace X`` on
+    both, so ``n_t = X^T W h_t`` (W the stiffness of :func:`hamsa.operators.laplacian_operators`), which
+    needs no normal's sign; the rotated moments use the cloud's outward normals and tangential gradients.
+
+    Like :func:`resolve_signs` it assumes the shapes are not reflections of each other: a reflected scan
+    gives the mirrored signs.
 
     Raises
     ------
     HamsaError
         If an index is not below min(source.k, target.k), or the meshes do not match the bases.
     """
-    from hamsa.diffusion import default_hks_times, heat_kernel_signature
+    from hamsa.diffusion import default_hks_times
     from hamsa.pointcloud import as_shape
 
     indices = np.asarray(indices)
@@ -72,21 +87,45 @@ def resolve_signs_without_truth(
         raise HamsaError(f"indices must be below k = {k}")
     times = default_hks_times(source, int(scales))
     shapes = (None, None) if meshes is None else tuple(as_shape(shape) for shape in meshes)
-    curvature = not all(isinstance(shape, TriMesh) for shape in shapes)  # the same field on both shapes
-    features = []
     for basis, shape in zip((source, target), shapes):
         if shape is not None and shape.n_vertices != basis.n:
             raise HamsaError(f"a mesh has {shape.n_vertices} vertices, its basis {basis.n}")
-        weights = basis.mass.diagonal()
-        heat = heat_kernel_signature(basis, times, scaled=True)
-        heat = heat / (weights @ heat)
-        functions = basis.vectors[:, indices]
-        parts = [(weights[:, None] * heat).T @ functions]  # (T, m) moments
-        if shape is not None:
-            field = _curvature_normals(shape) if curvature else _outward_normals(shape, weights)
-            parts.append(_chirality(field, shape.vertices, weights, heat, functions))
-        features.append(np.concatenate(parts))
-    return np.where(np.sum(features[0] * features[1], axis=0) >= 0, 1.0, -1.0)
+    squares = np.arange(1, min(int(squares) + 1, k))
+    areas = [basis.mass.diagonal().sum() for basis in (source, target)]
+    features = [
+        _SignFeatures(basis, times * area / areas[0], squares, indices) for basis, area in zip((source, target), areas)
+    ]
+    symmetry = np.ones(len(indices))
+    symmetry_signs = intrinsic_symmetry_signs(source)[0] if source.k > 1 else np.ones(1)
+    inside = indices < len(symmetry_signs)
+    symmetry[inside] = symmetry_signs[indices[inside]]
+
+    first = np.array([_cosines(*(f.first(j) for f in features)) for j in range(len(indices))])
+    signs = np.where(first >= 0, 1.0, -1.0)
+    kept, reversed_ = np.flatnonzero(symmetry > 0), np.flatnonzero(symmetry < 0)
+    if len(reversed_) == 0:
+        return signs
+    relative = _relative_signs(features, reversed_, kept, signs[kept])
+    if shapes[0] is None:
+        mirror = relative @ first[reversed_]
+    else:
+        curvature = not all(isinstance(shape, TriMesh) for shape in shapes)  # the same field on both shapes
+        orientation = []  # per shape: [chirality (T(T-1)/2, r), rotated moments (T(T-1)/2, r)]
+        for shape, f in zip(shapes, features):
+            field = _curvature_normals(shape) if curvature else _outward_normals(shape, f.element)
+            functions = f.functions[:, reversed_]
+            orientation.append(
+                [
+                    _chirality(field, shape.vertices, f.element, f.heat, functions),
+                    _rotated_moments(shape, f.heat, functions),
+                ]
+            )
+        mirror = sum(
+            r * _cosines([block[:, i] for block in orientation[0]], [block[:, i] for block in orientation[1]])
+            for i, r in enumerate(relative)
+        )
+    signs[reversed_] = relative * (1.0 if mirror >= 0 else -1.0)
+    return signs
 
 
 def matching_potentials(
@@ -108,6 +147,65 @@ def matching_potentials(
     return V_s / V_s.max(), V_t / V_t.max()
 
 
+class _SignFeatures:
+    """One shape's side of :func:`resolve_signs_without_truth`: the functions ``indices`` scaled to unit mean
+    square (n, m) and the sign-free weights (n, T + C) — the heat kernel signature at T times, scaled to mean 1,
+    and the squares of C functions — times the area element divided by the area, so that a weight's product
+    with a function summed over the vertices is its mean over the surface."""
+
+    def __init__(self, basis: Eigenbasis, times, squares, indices):
+        from hamsa.diffusion import heat_kernel_signature
+
+        element = basis.mass.diagonal()
+        area = element.sum()
+        heat = heat_kernel_signature(basis, times, scaled=True)
+        self.heat = heat * (area / (element @ heat))
+        self.functions = basis.vectors[:, indices] * np.sqrt(area)
+        squared = area * basis.vectors[:, squares] ** 2
+        self.element = element / area
+        self.weights = np.hstack([self.heat, squared]) * self.element[:, None]
+        self.split = len(times)
+
+    def _blocks(self, values) -> list[np.ndarray]:
+        moments = self.weights.T @ values
+        return [moments[: self.split], moments[self.split :]]
+
+    def first(self, j) -> list[np.ndarray]:
+        """[heat block (T,), squares block (C,)]: the means of g phi~_j."""
+        return self._blocks(self.functions[:, j])
+
+    def second(self, a, b, kept, kept_signs) -> list[np.ndarray]:
+        """The means of g phi~_a phi~_b (heat, squares) and of s_c phi~_a phi~_b phi~_c for the kept c."""
+        product = self.functions[:, a] * self.functions[:, b]
+        triple = (self.element * product) @ self.functions[:, kept] * kept_signs
+        return self._blocks(product) + ([triple] if len(kept) else [])
+
+
+def _cosines(blocks_source, blocks_target) -> float:
+    """The sum over blocks of the cosine between the source's and the target's features."""
+    total = 0.0
+    for x, y in zip(blocks_source, blocks_target):
+        total += float(x @ y) / max(float(np.linalg.norm(x) * np.linalg.norm(y)), 1e-300)
+    return total
+
+
+def _relative_signs(features, reversed_, kept, kept_signs) -> np.ndarray:
+    """(len(reversed_),) signs, the first +1, maximizing the summed evidence s_a s_b of the second-order
+    features over the pairs of reversed functions."""
+    evidence = {
+        (a, b): _cosines(*(f.second(reversed_[a], reversed_[b], kept, kept_signs) for f in features))
+        for a in range(len(reversed_))
+        for b in range(a + 1, len(reversed_))
+    }
+    best, chosen = -np.inf, np.ones(len(reversed_))
+    for pattern in itertools.product((1.0, -1.0), repeat=len(reversed_) - 1):
+        signs = np.array((1.0,) + pattern)
+        score = sum(signs[a] * signs[b] * e for (a, b), e in evidence.items())
+        if score > best:
+            best, chosen = score, signs
+    return chosen
+
+
 def _chirality(field, points, weights, heat, functions) -> np.ndarray:
     """(T (T - 1) / 2, m) determinants det(n_t, n_u, x_j) = (n_t x n_u) . x_j of
     :func:`resolve_signs_without_truth`, with ``n_t = heat[:, t] @ field`` for the area-weighted vector
@@ -121,13 +219,40 @@ def _chirality(field, points, weights, heat, functions) -> np.ndarray:
     return np.cross(normals[t], normals[u]) @ moments.T
 
 
+def _rotated_moments(shape, heat, functions) -> np.ndarray:
+    """(T (T - 1) / 2, m) ``int h_t (N x grad h_u) . grad phi_j dA`` for the columns h_t of ``heat`` (n, T),
+    t < u, and the ``functions`` (n, m), with N outward: the quadrature of
+    :func:`~hamsa.matching.functional.orientation_operator`."""
+    from hamsa.matching.functional import _gradient_quadrature
+
+    outward = 1.0  # a cloud's normals point outward
+    if isinstance(shape, TriMesh):
+        shape, outward = _oriented(shape)
+    normals, weighted_heat, gradients = _gradient_quadrature(shape, heat)
+    rotated = np.cross(normals[:, :, None], gradients(heat), axis=1)  # (q, 3, T) at the q quadrature points
+    along = np.einsum("qcu,qcj->quj", rotated, gradients(functions))
+    t, u = np.triu_indices(heat.shape[1], 1)
+    return outward * np.einsum("qt,quj->tuj", weighted_heat, along)[t, u]
+
+
 def _outward_normals(mesh: TriMesh, weights: np.ndarray) -> np.ndarray:
     """(n, 3) vertex unit normals times ``weights``, the faces oriented consistently and outward."""
+    mesh, outward = _oriented(mesh)  # a few flipped faces would bend the near-cancelling mean normals
+    return outward * weights[:, None] * mesh.vertex_normals
+
+
+def _oriented(mesh: TriMesh) -> tuple[TriMesh, float]:
+    """(mesh with its faces oriented consistently, +-1 making them face outward). The outward side is where the
+    signed volume is positive on a surface that encloses one: closed, or with holes whose caps are small (the
+    faces' vector area, which a closed surface has zero, under a tenth of their area). An open sheet keeps its
+    faces' own side: its signed volume depends on the origin."""
     from hamsa.repair import orient_faces
 
-    mesh = orient_faces(mesh)  # a few flipped faces would bend the near-cancelling mean normals
-    outward = np.sign(mesh.signed_volume) or 1.0
-    return outward * weights[:, None] * mesh.vertex_normals
+    mesh = orient_faces(mesh)
+    corners = mesh.vertices[mesh.faces]
+    vector_areas = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    encloses = np.linalg.norm(vector_areas.sum(axis=0)) < 0.1 * np.linalg.norm(vector_areas, axis=1).sum()
+    return mesh, (np.sign(mesh.signed_volume) or 1.0) if encloses else 1.0
 
 
 def _curvature_normals(shape) -> np.ndarray:

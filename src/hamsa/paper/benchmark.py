@@ -101,7 +101,7 @@ def paired_bases(
     ``eigensum_scale x`` (normalized sum of phi_2..phi_5, scaled to [0, 1]).
 
     ``signs``: "descriptors" (default) makes the target's eigenfunction signs agree with the source's from
-    the two shapes alone (:func:`hamsa.matching.resolve_signs_without_truth`, HKS moments and the
+    the two shapes alone (:func:`hamsa.matching.resolve_signs_without_truth`, intrinsic moments and the
     surfaces' orientation); "truth" with ``ground_truth`` (n_source,) target ids (-1 where unknown), as
     the paper assumes (an oracle).
     """
