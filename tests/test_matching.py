@@ -508,8 +508,8 @@ def test_signs_without_truth_tell_a_function_from_its_mirror_image(posed_humanoi
 def test_signs_without_truth_decide_the_reversed_functions_together(posed_humanoids):
     """Without the surfaces no intrinsic quantity tells a function the symmetry reverses from its mirror image,
     but the relative signs of two such functions are intrinsic (their product is symmetric): for each
-    pattern of flips (the first function's kept) the functions the symmetry keeps come out right and the reversed ones all right or all
-    mirrored together — never some of each, which fits no map."""
+    pattern of flips (the first function's kept) the functions the symmetry keeps come out right and the
+    reversed ones all right or all mirrored together — never some of each, which fits no map."""
     from hamsa.matching import resolve_signs, resolve_signs_without_truth
 
     _, (rest, walk) = posed_humanoids
