@@ -112,12 +112,15 @@ def resolve_signs_without_truth(
         curvature = not all(isinstance(shape, TriMesh) for shape in shapes)  # the same field on both shapes
         orientation = []  # per shape: [chirality (T(T-1)/2, r), rotated moments (T(T-1)/2, r)]
         for shape, f in zip(shapes, features):
-            field = _curvature_normals(shape) if curvature else _outward_normals(shape, f.element)
+            outward = 1.0  # a cloud's normals point outward
+            if isinstance(shape, TriMesh):  # a few flipped faces would bend the near-cancelling mean normals
+                shape, outward = _oriented(shape)
+            field = _curvature_normals(shape) if curvature else outward * f.element[:, None] * shape.vertex_normals
             functions = f.functions[:, reversed_]
             orientation.append(
                 [
                     _chirality(field, shape.vertices, f.element, f.heat, functions),
-                    _rotated_moments(shape, f.heat, functions),
+                    outward * _rotated_moments(shape, f.heat, functions),
                 ]
             )
         mirror = sum(
@@ -221,24 +224,15 @@ def _chirality(field, points, weights, heat, functions) -> np.ndarray:
 
 def _rotated_moments(shape, heat, functions) -> np.ndarray:
     """(T (T - 1) / 2, m) ``int h_t (N x grad h_u) . grad phi_j dA`` for the columns h_t of ``heat`` (n, T),
-    t < u, and the ``functions`` (n, m), with N outward: the quadrature of
-    :func:`~hamsa.matching.functional.orientation_operator`."""
+    t < u, and the ``functions`` (n, m), N on the side the faces (or a cloud's normals) give: the quadrature
+    of :func:`~hamsa.matching.functional.orientation_operator`."""
     from hamsa.matching.functional import _gradient_quadrature
 
-    outward = 1.0  # a cloud's normals point outward
-    if isinstance(shape, TriMesh):
-        shape, outward = _oriented(shape)
     normals, weighted_heat, gradients = _gradient_quadrature(shape, heat)
     rotated = np.cross(normals[:, :, None], gradients(heat), axis=1)  # (q, 3, T) at the q quadrature points
     along = np.einsum("qcu,qcj->quj", rotated, gradients(functions))
     t, u = np.triu_indices(heat.shape[1], 1)
-    return outward * np.einsum("qt,quj->tuj", weighted_heat, along)[t, u]
-
-
-def _outward_normals(mesh: TriMesh, weights: np.ndarray) -> np.ndarray:
-    """(n, 3) vertex unit normals times ``weights``, the faces oriented consistently and outward."""
-    mesh, outward = _oriented(mesh)  # a few flipped faces would bend the near-cancelling mean normals
-    return outward * weights[:, None] * mesh.vertex_normals
+    return np.einsum("qt,quj->tuj", weighted_heat, along)[t, u]
 
 
 def _oriented(mesh: TriMesh) -> tuple[TriMesh, float]:
@@ -249,9 +243,8 @@ def _oriented(mesh: TriMesh) -> tuple[TriMesh, float]:
     from hamsa.repair import orient_faces
 
     mesh = orient_faces(mesh)
-    corners = mesh.vertices[mesh.faces]
-    vector_areas = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    encloses = np.linalg.norm(vector_areas.sum(axis=0)) < 0.1 * np.linalg.norm(vector_areas, axis=1).sum()
+    vector_area = mesh.face_areas @ mesh.face_normals
+    encloses = np.linalg.norm(vector_area) < 0.1 * mesh.face_areas.sum()
     return mesh, (np.sign(mesh.signed_volume) or 1.0) if encloses else 1.0
 
 
