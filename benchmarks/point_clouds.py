@@ -18,13 +18,14 @@ chosen from the shapes alone, as there), and ``icskm`` from 3 seeded ground-trut
 itself: the heat method on a mesh, the point-cloud heat method (potpourri3d) on a cloud. The table gives the
 AUC on [0, 0.25] and the fraction within 0.05, averaged over pairs, and the bar of the point-cloud issue:
 on clouds the Hamiltonian is at least as good as the LBO for every method, and within 5 points (fraction
-within 0.05) of the same method and basis on the mesh.
+within 0.05) of the same method on the mesh (the LBO's own gaps to the mesh are listed, not counted).
 
     OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--scape-skip 0] [--tosca-classes centaur horse]
         [--jobs 2] [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
     python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
     python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
     python benchmarks/point_clouds.py --build 50000 200000         # the operators' cost against robust_laplacian
+    python benchmarks/point_clouds.py --table scape.json tosca.json  # the table and the bar of saved rows
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from scipy.spatial import cKDTree
 
 import hamsa
 from hamsa.datasets import load_scape, load_tosca
+from hamsa.files import atomic_write
 from hamsa.paper.benchmark import dataset_pairs, evaluate_pair, identity_truth
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -166,13 +168,17 @@ def build_seconds(points: np.ndarray, repeats: int = 3) -> dict:
     return {stage: tuple(np.median(np.array(values), axis=0)) for stage, values in times.items()}
 
 
-def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
-    """The markdown table of pair means and the list of bar failures."""
+def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str], list[str]]:
+    """The markdown table of pair means, the bar's failures and the LBO's gaps to the mesh.
+
+    The bar (the point-cloud issue): on every cloud representation and for every method the Hamiltonian's AUC
+    is at least the LBO's, and its fraction within 0.05 at most 5 points below the same method's Hamiltonian
+    on the mesh. The LBO's own gaps to the mesh are listed apart: they are not part of the bar."""
     lines = [
         "| dataset | method | representation | pairs | LBO AUC | H AUC | LBO within 0.05 | H within 0.05 |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    failures, mean = [], {}
+    failures, lbo_gaps, mean = [], [], {}
     for dataset in dict.fromkeys(r["dataset"] for r in rows):
         for method in methods:
             for representation in REPRESENTATIONS:
@@ -190,12 +196,24 @@ def table(rows: list[dict], methods=METHODS) -> tuple[str, list[str]]:
             for representation in REPRESENTATIONS[1:]:
                 cloud, mesh = mean[dataset, method, representation], mean[dataset, method, "mesh"]
                 if cloud["hamiltonian"][0] < cloud["lbo"][0]:
-                    failures.append(f"{dataset} {method} {representation}: Hamiltonian AUC below the LBO's")
-                for basis in ("lbo", "hamiltonian"):
+                    failures.append(
+                        f"{dataset} {method} {representation}: Hamiltonian AUC {cloud['hamiltonian'][0]:.3f} below "
+                        f"the LBO's {cloud['lbo'][0]:.3f}"
+                    )
+                for basis, found in (("hamiltonian", failures), ("lbo", lbo_gaps)):
                     gap = 100 * (mesh[basis][1] - cloud[basis][1])
                     if gap > 5:
-                        failures.append(f"{dataset} {method} {representation} {basis}: {gap:.1f} points below the mesh")
-    return "\n".join(lines), failures
+                        found.append(f"{dataset} {method} {representation} {basis}: {gap:.1f} points below the mesh")
+    return "\n".join(lines), failures, lbo_gaps
+
+
+def report(rows: list[dict], methods=METHODS) -> None:
+    """Print the table of ``rows`` (SCAPE first), whether the bar is met, and the LBO's gaps to the mesh."""
+    text, failures, lbo_gaps = table(sorted(rows, key=lambda r: (r["dataset"] != "scape", r["pair"])), methods)
+    print(text)
+    print("bar met" if not failures else "bar not met:\n  " + "\n  ".join(failures))
+    if lbo_gaps:
+        print("the LBO more than 5 points below the mesh (not part of the bar):\n  " + "\n  ".join(lbo_gaps))
 
 
 def main(argv=None) -> int:
@@ -245,8 +263,18 @@ def main(argv=None) -> int:
         help="instead of matching: the seconds of building the operators of N sphere samples (and of TOSCA "
         "david0's vertices when the data is there), hamsa's stages against robust_laplacian's point-cloud Laplacian",
     )
-    parser.add_argument("-o", "--output", help="write the rows as JSON")
+    parser.add_argument(
+        "--table",
+        nargs="+",
+        metavar="JSON",
+        help="instead of matching: the table and the bar of rows written by earlier runs (-o), joined",
+    )
+    parser.add_argument("-o", "--output", help="write the rows as JSON (after every pair)")
     args = parser.parse_args(argv)
+    if args.table:
+        rows = [row for name in args.table for row in json.loads(Path(name).read_text())]
+        report(rows, [m for m in METHODS if any(r["method"] == m for r in rows)])
+        return 0
     if args.build:
         clouds = {f"sphere {n}": hamsa.shapes.sphere(n).vertices for n in args.build}
         if DATA.is_dir():
@@ -308,12 +336,11 @@ def main(argv=None) -> int:
     for pair_rows in results:
         rows += pair_rows
         print(f"  {pair_rows[0]['dataset']} {pair_rows[0]['pair']} done", file=sys.stderr, flush=True)
-    text, failures = table(sorted(rows, key=lambda r: (r["dataset"] != "scape", r["pair"])), args.methods)
+        if args.output:  # the pairs so far, so that a long run stopped early keeps them
+            with atomic_write(args.output, "w") as handle:
+                handle.write(json.dumps(rows, indent=1))
     print(f"hamsa {hamsa.__version__}, {len(work)} pairs, {time.perf_counter() - start:.0f} s wall")
-    print(text)
-    print("bar met" if not failures else "bar not met:\n  " + "\n  ".join(failures))
-    if args.output:
-        Path(args.output).write_text(json.dumps(rows, indent=1))
+    report(rows, args.methods)
     return 0
 
 
