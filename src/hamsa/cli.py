@@ -204,12 +204,14 @@ def _parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog="hamsa",
-        description="Hamiltonian spectral shape analysis: eigenbases of -Laplacian + V on triangle meshes.",
+        description="Hamiltonian spectral shape analysis: eigenbases of -Laplacian + V on meshes and point clouds.",
     )
     parser.add_argument("--version", action="version", version=f"hamsa {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    info = commands.add_parser("info", help="describe a mesh: size, area, components, boundaries, defects")
+    info = commands.add_parser(
+        "info", help="describe a mesh or a point cloud: size, area, components, boundaries, defects"
+    )
     info.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     _add_cloud_options(info)
 
