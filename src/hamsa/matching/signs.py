@@ -285,25 +285,23 @@ def intrinsic_symmetry_signs(
     spectrum = np.abs(basis.values[1 : k + 1])
     embedding = basis.vectors[:, 1 : k + 1] / np.sqrt(np.maximum(spectrum, 1e-9 * spectrum.max()))
     size = np.mean(np.sum(embedding[queries] ** 2, axis=1))
-    trees = {}  # m -> k-d tree of the candidates' first m coordinates
 
-    def residual(signs, m):
-        flipped = embedding[queries, :m] * signs[:m]
-        if m not in trees:
-            trees[m] = cKDTree(embedding[candidates, :m])
-        nearest = candidates[nearest_in(trees[m], flipped)]
-        return float(np.mean(np.sum((flipped - embedding[nearest, :m]) ** 2, axis=1)) / size)
+    def residuals(patterns):
+        """(r,) the residual of each sign pattern (r, m) in the embedding's first m coordinates."""
+        r, m = patterns.shape
+        flipped = (embedding[queries, :m][None, :, :] * patterns[:, None, :]).reshape(-1, m)
+        nearest = candidates[nearest_in(cKDTree(embedding[candidates, :m]), flipped)]
+        return np.mean(np.sum((flipped - embedding[nearest, :m]) ** 2, axis=1).reshape(r, -1), axis=1) / size
 
-    best = (np.inf, np.inf, None)  # (residual per displacement, residual, signs)
-    for first in range(k):
-        signs = np.ones(k)
-        signs[first] = -1.0
-        for i in range(first + 1, k):
-            keep = residual(signs, i + 1)
-            signs[i] = -1.0
-            if keep <= residual(signs, i + 1):
-                signs[i] = 1.0
-        moved = np.mean(np.sum((embedding[queries] * (signs - 1.0)) ** 2, axis=1)) / size
-        found = residual(signs, k)
-        best = min(best, (found / moved, found, signs), key=lambda run: run[0])
-    return np.concatenate([[1.0], best[2]]), best[1]
+    # the greedy searches of all first flipped functions j (row j) side by side, one coordinate at a time
+    patterns = np.ones((k, k))
+    patterns[np.arange(k), np.arange(k)] = -1.0
+    for i in range(1, k):
+        trial = np.repeat(patterns[:i, None, : i + 1], 2, axis=1)  # (searches, keep / flip, i + 1)
+        trial[:, 1, i] = -1.0
+        keep, flip = residuals(trial.reshape(2 * i, i + 1)).reshape(i, 2).T
+        patterns[:i, i] = np.where(keep <= flip, 1.0, -1.0)
+    found = residuals(patterns)
+    moved = np.mean(np.sum((embedding[queries][None, :, :] * (patterns[:, None, :] - 1.0)) ** 2, axis=2), axis=1) / size
+    best = int(np.argmin(found / moved))
+    return np.concatenate([[1.0], patterns[best]]), float(found[best])
