@@ -21,7 +21,7 @@ on clouds the Hamiltonian is at least as good as the LBO for every method, and w
 within 0.05) of the same method on the mesh (the LBO's own gaps to the mesh are listed, not counted).
 
     OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--scape-skip 0] [--tosca-classes centaur horse]
-        [--jobs 2] [--methods hks] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
+        [--jobs 2] [--methods hks] [--representations cloud] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
     python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
     python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
     python benchmarks/point_clouds.py --build 50000 200000         # the operators' cost against robust_laplacian
@@ -67,9 +67,11 @@ def pair_scores(
     methods=METHODS,
     orientation: float = 0.0,
     cloud_options: dict | None = None,
+    representations=REPRESENTATIONS,
 ) -> list[dict]:
-    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair; ``cloud_options``:
-    keywords of :class:`hamsa.PointCloud` (``separate_sheets``, ``off_sheet``)."""
+    """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair, for the
+    ``representations`` named; ``cloud_options``: keywords of :class:`hamsa.PointCloud` (``separate_sheets``,
+    ``off_sheet``)."""
     source, target, truth = unit_area_pair(dataset, source_name, target_name)
     rng = np.random.default_rng(0)
     half_s = np.sort(rng.choice(source.n_vertices, source.n_vertices // 2, replace=False))
@@ -90,7 +92,8 @@ def pair_scores(
         ),
     }
     rows = []
-    for representation, (s, t, true_map) in shapes.items():
+    for representation in representations:
+        s, t, true_map = shapes[representation]
         start = time.perf_counter()
         result = evaluate_pair(s, t, true_map, k, methods, points, landmarks=3, orientation_weight=orientation)
         seconds = time.perf_counter() - start
@@ -227,6 +230,13 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="pairs solved in parallel processes")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument(
+        "--representations",
+        nargs="+",
+        choices=REPRESENTATIONS,
+        default=list(REPRESENTATIONS),
+        help="only these representations of each pair (default: all three)",
+    )
+    parser.add_argument(
         "--orientation", type=float, default=0.0, help="orientation-term weight of fmap's start map (default 0)"
     )
     sheets = parser.add_mutually_exclusive_group()
@@ -267,12 +277,17 @@ def main(argv=None) -> int:
         "--table",
         nargs="+",
         metavar="JSON",
-        help="instead of matching: the table and the bar of rows written by earlier runs (-o), joined",
+        help="instead of matching: the table and the bar of rows written by earlier runs (-o), joined (a later "
+        "file's row replaces an earlier one's for the same pair, representation, method and basis)",
     )
     parser.add_argument("-o", "--output", help="write the rows as JSON (after every pair)")
     args = parser.parse_args(argv)
     if args.table:
-        rows = [row for name in args.table for row in json.loads(Path(name).read_text())]
+        keyed = {}  # a later file's row replaces an earlier one's of the same pair, representation, method, basis
+        for name in args.table:
+            for row in json.loads(Path(name).read_text()):
+                keyed[row["dataset"], row["pair"], row["representation"], row["method"], row["basis"]] = row
+        rows = list(keyed.values())
         report(rows, [m for m in METHODS if any(r["method"] == m for r in rows)])
         return 0
     if args.build:
@@ -329,7 +344,9 @@ def main(argv=None) -> int:
     cloud_options = {"separate_sheets": not args.joined_sheets, "off_sheet": args.off_sheet}
     start = time.perf_counter()
     results = Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
-        delayed(pair_scores)(dataset, s, t, args.k, args.points, args.methods, args.orientation, cloud_options)
+        delayed(pair_scores)(
+            dataset, s, t, args.k, args.points, args.methods, args.orientation, cloud_options, args.representations
+        )
         for dataset, s, t in work
     )
     rows = []
