@@ -262,14 +262,17 @@ def intrinsic_symmetry_signs(
 
     An intrinsic symmetry T (an isometry of the shape onto itself) maps every eigenfunction of a simple
     eigenvalue to plus or minus itself, ``psi_i o T = s_i psi_i``, so it acts on the spectral embedding
-    ``g(x) = (psi_i(x) / sqrt|E_i|)_{i=1..k}`` as a sign flip. The signs are found greedily: for each
-    candidate first flipped function j (the identity is excluded), the later signs are chosen one at a
-    time by the nearest-neighbour residual ``mean_x min_y |g(x) s - g(y)|^2 / mean |g|^2`` on seeded
-    samples (``sample`` queries, ``database`` candidates). The pattern that wins has the lowest residual
-    *per displacement* ``mean_x |g(x) s - g(x)|^2 / mean |g|^2``: flipping only a high, lightly weighted
-    function leaves a small residual because it hardly moves the embedding, while a mirror moves it far
-    even on a shape that is only nearly symmetric. The ground state (index 0: the constant, or a
-    Hamiltonian's positive ground state) is kept.
+    ``g(x) = (psi_i(x) / sqrt|E_i|)_{i=1..k}`` as a sign flip. A pattern s is scored by its
+    nearest-neighbour residual ``mean_x min_y |g(x) s - g(y)|^2 / mean |g|^2`` on seeded samples
+    (``sample`` queries, ``database`` candidates) *per displacement* ``mean_x |g(x) s - g(x)|^2 / mean
+    |g|^2``: flipping only a high, lightly weighted function leaves a small residual because it hardly
+    moves the embedding, while a mirror moves it far even on a shape that is only nearly symmetric. The
+    signs are found greedily: for each candidate first flipped function j (the identity is excluded), the
+    later signs are chosen one at a time by that score in the coordinates decided so far, and the pattern
+    with the lowest score over all k coordinates wins; where both signs of a function match equally well
+    in the coordinates so far, the score flips it (its displacement is larger), and the later coordinates
+    decide whether that pattern holds. The ground state (index 0: the constant, or a Hamiltonian's
+    positive ground state) is kept.
 
     Returns
     -------
@@ -287,11 +290,15 @@ def intrinsic_symmetry_signs(
     size = np.mean(np.sum(embedding[queries] ** 2, axis=1))
 
     def residuals(patterns):
-        """(r,) the residual of each sign pattern (r, m) in the embedding's first m coordinates."""
+        """(residual, displacement), each (r,), of the sign patterns (r, m) in the embedding's first m
+        coordinates."""
         r, m = patterns.shape
-        flipped = (embedding[queries, :m][None, :, :] * patterns[:, None, :]).reshape(-1, m)
+        points = embedding[queries, :m][None, :, :]
+        flipped = (points * patterns[:, None, :]).reshape(-1, m)
         nearest = candidates[nearest_in(cKDTree(embedding[candidates, :m]), flipped)]
-        return np.mean(np.sum((flipped - embedding[nearest, :m]) ** 2, axis=1).reshape(r, -1), axis=1) / size
+        found = np.mean(np.sum((flipped - embedding[nearest, :m]) ** 2, axis=1).reshape(r, -1), axis=1)
+        moved = np.mean(np.sum((points * (patterns[:, None, :] - 1.0)) ** 2, axis=2), axis=1)
+        return found / size, moved / size
 
     # the greedy searches of all first flipped functions j (row j) side by side, one coordinate at a time
     patterns = np.ones((k, k))
@@ -299,9 +306,9 @@ def intrinsic_symmetry_signs(
     for i in range(1, k):
         trial = np.repeat(patterns[:i, None, : i + 1], 2, axis=1)  # (searches, keep / flip, i + 1)
         trial[:, 1, i] = -1.0
-        keep, flip = residuals(trial.reshape(2 * i, i + 1)).reshape(i, 2).T
+        found, moved = residuals(trial.reshape(2 * i, i + 1))
+        keep, flip = (found / moved).reshape(i, 2).T
         patterns[:i, i] = np.where(keep <= flip, 1.0, -1.0)
-    found = residuals(patterns)
-    moved = np.mean(np.sum((embedding[queries][None, :, :] * (patterns[:, None, :] - 1.0)) ** 2, axis=2), axis=1) / size
+    found, moved = residuals(patterns)
     best = int(np.argmin(found / moved))
     return np.concatenate([[1.0], patterns[best]]), float(found[best])
