@@ -27,7 +27,7 @@ import hamsa
 from hamsa.datasets import cached_eigenbasis
 from hamsa.evaluation import evaluated_points, summary
 from hamsa.geodesic import geodesic_solver
-from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
+from hamsa.matching.functional import COMMUTATIVITY_WEIGHT
 from hamsa.paper.benchmark import match_pair
 
 METHODS = ("hks", "fmap")

@@ -213,7 +213,8 @@ def test_the_start_map_weights_reach_the_fmap_start_and_are_named_in_the_table(p
         dataset, tmp_path, methods=("fmap",), k=30, points=200, limit=1, progress=False, commutativity_weight=0.0
     )
     assert table["commutativity_weight"] == 0.0
-    assert "Descriptor-commutativity weight of the fmap / sgfe start: 0.0." in (tmp_path / "table.md").read_text()
+    label = "Descriptor-commutativity weight of the fmap / sgfe start and the ICSKM landmark fit"
+    assert f"{label}: 0.0." in (tmp_path / "table.md").read_text()
     expected = evaluate_pair(*load_pair(dataset, "humanoid0", "humanoid1"), k=30, methods=("fmap",), points=200,
                              commutativity_weight=0.0)["rows"]  # fmt: skip
     for row, reference in zip(table["rows"], expected):
@@ -221,6 +222,9 @@ def test_the_start_map_weights_reach_the_fmap_start_and_are_named_in_the_table(p
             assert row[key] == pytest.approx(reference[key], rel=1e-12)
     hks = benchmark_dataset(dataset, tmp_path / "hks", methods=("hks",), k=30, points=200, limit=1, progress=False)
     assert "commutativity_weight" not in hks and "orientation_weight" not in hks  # no functional-map start
+    icskm = benchmark_dataset(dataset, tmp_path / "icskm", methods=("icskm",), k=30, points=200, limit=1,
+                              progress=False, commutativity_weight=0.0)  # fmt: skip
+    assert icskm["commutativity_weight"] == 0.0 and "orientation_weight" not in icskm  # the landmark fit's
     assert "orientation_weight" not in table  # the default, 0, is no term
     oriented = benchmark_dataset(dataset, tmp_path / "oriented", methods=("fmap",), k=30, points=200, limit=1,
                                  progress=False, commutativity_weight=0.0, orientation_weight=0.1)  # fmt: skip

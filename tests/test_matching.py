@@ -109,12 +109,54 @@ def test_icskm_recovers_an_isometry_from_one_landmark(pair):
         match_icskm(source, target, [0], [0], scales=(6, 0))
 
 
+def test_icskm_landmark_fit_takes_the_commutativity_weight_of_match(pair):
+    """``match(..., "icskm", commutativity_weight=w)`` is ``match_icskm(..., commutativity_weight=w)``; the
+    weight reaches the landmark fit (0 and the default give different starts); a negative or non-finite
+    weight is refused."""
+    from hamsa.matching.functional import COMMUTATIVITY_WEIGHT
+    from hamsa.matching.icskm import landmark_fit
+
+    flat, rolled = pair
+    bases = hamsa.eigenbasis(flat, 30), hamsa.eigenbasis(rolled, 30)
+    landmarks = np.array([0, 40, 90])
+    for weight in (0.0, COMMUTATIVITY_WEIGHT):
+        expected = match_icskm(*bases, landmarks, landmarks, commutativity_weight=weight)[1]
+        got = hamsa.matching.match(*bases, "icskm", landmarks=(landmarks, landmarks), commutativity_weight=weight)
+        np.testing.assert_array_equal(got, expected)
+    plain, commuting = (landmark_fit(*bases, landmarks, landmarks, weight) for weight in (0.0, COMMUTATIVITY_WEIGHT))
+    assert np.abs(plain - commuting).max() > 1e-3
+    for weight in (-1.0, float("nan")):
+        with pytest.raises(HamsaError, match="commutativity weight"):
+            match_icskm(*bases, landmarks, landmarks, commutativity_weight=weight)
+
+
+@pytest.mark.data
+def test_icskm_landmark_fit_with_descriptor_commutativity_is_closer_to_the_true_map_on_scape():
+    """Three landmarks give the landmark fit 20 descriptors (their heat kernels and the HKS at five scales)
+    for the 400 entries of C's first 20 x 20 block: on SCAPE mesh000 -> mesh030 the plain fit is far from
+    the ground truth's functional map (Frobenius distance 2.4 of at most 2 sqrt(20)), the fit with the
+    descriptor-commutativity term close to it (0.45)."""
+    from hamsa.matching.icp import procrustes
+    from hamsa.matching.icskm import landmark_fit
+
+    from conftest import data_mesh
+
+    source, target = (data_mesh(f"scape/meshes/{name}.off.gz").scaled_to_unit_area() for name in ("mesh000", "mesh030"))
+    bases = hamsa.eigenbasis(source, 20), hamsa.eigenbasis(target, 20)
+    landmarks = np.random.default_rng(1).choice(source.n_vertices, 3, replace=False)  # identity ground truth
+    true = procrustes(bases[0].vectors.T @ (bases[0].mass @ bases[1].vectors))
+    distance = {w: np.linalg.norm(landmark_fit(*bases, landmarks, landmarks, w) - true) for w in (0.0, 0.03)}
+    assert distance[0.0] > 1.5 and distance[0.03] < 1.0, distance  # measured 2.39 and 0.45
+
+
 @pytest.mark.data
 def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark():
     """Paper section 5 (ICSKM), single runs as in the paper (one heat schedule of six scales, no restarts):
     three ground-truth landmarks put ICSKM below 0.05 mean error on a SCAPE pair with either basis; from a
-    single landmark the LBO version flips left and right while the Hamiltonian with V = geodesic distance
-    from the landmark does not. With the sign-flipped restarts the LBO version does not flip either."""
+    single landmark with the plain landmark fit (no descriptor-commutativity term) the LBO version flips
+    left and right while the Hamiltonian with V = geodesic distance from the landmark does not. With the
+    sign-flipped restarts, or with the default fit (the commutativity term), the LBO version does not flip
+    either."""
     from hamsa.evaluation import sample_points
 
     from conftest import data_mesh
@@ -130,21 +172,27 @@ def test_icskm_with_landmarks_on_scape_and_the_hamiltonian_resolves_one_landmark
             if basis == "hamiltonian":
                 V = [geodesic_distance(mesh, landmarks, normalize=True) for mesh in (source, target)]
             bases = hamsa.eigenbasis(source, 50, V[0]), hamsa.eigenbasis(target, 50, V[1])
-            for restarts in (0, 5) if (basis, count) == ("lbo", 1) else (0,):
-                _, mapping = match_icskm(*bases, landmarks, landmarks, scales=6, restarts=restarts)
-                errors[count, basis, restarts] = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
-    # measured: three landmarks 0.019 with either basis; one landmark LBO 0.285, with restarts 0.018, H 0.018
-    assert errors[3, "lbo", 0] < 0.05 and errors[3, "hamiltonian", 0] < 0.05, errors
-    assert errors[1, "hamiltonian", 0] < 0.05 and errors[1, "lbo", 0] > 0.2 and errors[1, "lbo", 5] < 0.05, errors
+            runs = ((0, 0.0), (5, 0.0), (0, None)) if (basis, count) == ("lbo", 1) else ((0, 0.0),)
+            for restarts, weight in runs:
+                fit = {} if weight is None else {"commutativity_weight": weight}
+                _, mapping = match_icskm(*bases, landmarks, landmarks, scales=6, restarts=restarts, **fit)
+                error = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
+                errors[count, basis, restarts, weight] = error
+    # measured: three landmarks 0.019 with either basis; one landmark, plain fit: LBO 0.285, with restarts
+    # 0.018, H 0.018; LBO with the default fit 0.018
+    assert errors[3, "lbo", 0, 0.0] < 0.05 and errors[3, "hamiltonian", 0, 0.0] < 0.05, errors
+    assert errors[1, "hamiltonian", 0, 0.0] < 0.05 and errors[1, "lbo", 0, 0.0] > 0.2, errors
+    assert errors[1, "lbo", 5, 0.0] < 0.05 and errors[1, "lbo", 0, None] < 0.05, errors
 
 
 @pytest.mark.data
 def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur():
     """TOSCA centaur0 -> centaur1 from one landmark (vertex 7461, near the symmetry plane), Hamiltonian basis
-    (V = geodesic distance from it): the landmark fit has psi_5's sign wrong. Restarting only from psi_1 and
-    the first antisymmetric function flipped (psi_4) ends in a partial mirror whose ICP energy is lower than
-    the unflipped run's; with psi_1..psi_5 each flipped in turn the psi_5 start reaches the lowest energy of
-    all and the right map."""
+    (V = geodesic distance from it): the plain landmark fit (no descriptor-commutativity term) has psi_5's
+    sign wrong. Restarting only from psi_1 and the first antisymmetric function flipped (psi_4) ends in a
+    partial mirror whose ICP energy is lower than the unflipped run's; with psi_1..psi_5 each flipped in turn
+    the psi_5 start reaches the lowest energy of all and the right map. The default fit (with the term)
+    starts right: no restart is needed."""
     from hamsa.datasets import load_tosca
     from hamsa.evaluation import sample_points
 
@@ -156,11 +204,12 @@ def test_icskm_restarts_find_the_flip_the_landmark_leaves_open_on_tosca_centaur(
     bases = [hamsa.eigenbasis(m, 100, geodesic_distance(m, landmark, normalize=True)) for m in (source, target)]
     points = sample_points(source.n_vertices, 1000)
     errors = {}
-    for restarts in (1, 5):  # one schedule: the flips alone
-        _, mapping = match_icskm(*bases, landmark, landmark, restarts=restarts, scales=6)
+    for restarts, weight in ((1, 0.0), (5, 0.0), (0, None)):  # one schedule: the flips alone
+        fit = {} if weight is None else {"commutativity_weight": weight}
+        _, mapping = match_icskm(*bases, landmark, landmark, restarts=restarts, scales=6, **fit)
         errors[restarts] = summary(geodesic_errors(target, mapping[points], points))["mean_error"]
-    # measured: 1 restart 0.101 (partial mirror), 5 restarts 0.016
-    assert errors[5] < 0.03 and errors[1] > 0.05, errors
+    # measured: plain fit, 1 restart 0.101 (partial mirror), 5 restarts 0.016; default fit, no restart 0.016
+    assert errors[5] < 0.03 and errors[1] > 0.05 and errors[0] < 0.03, errors
 
 
 @pytest.mark.data

@@ -66,8 +66,9 @@ GEODESICS_HELP = (
     "geodesics as in the published curves; the [geodesics] extra, much slower)"
 )
 COMMUTATIVITY_HELP = (
-    "descriptor-commutativity weight of the functional map that starts fmap (and sgfe): ||C M_g - M_f C||^2 over the "
-    "HKS columns (default {default:g}, chosen on half of the SCAPE pairs; 0: the plain descriptor fit)"
+    "descriptor-commutativity weight of the functional map that starts fmap (and sgfe), and of ICSKM's landmark fit: "
+    "||C M_g - M_f C||^2 over the descriptor columns (default {default:g}, chosen for fmap on half of the SCAPE pairs; "
+    "0: the plain descriptor fit)"
 )
 ORIENTATION_HELP = (
     "orientation-preserving weight of that functional map, which tells a map from its mirror image (a left-right "
@@ -199,7 +200,7 @@ def _unusual(mesh, tufted: bool) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     from hamsa.geodesic import GEODESIC_METHODS
-    from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT
+    from hamsa.matching.functional import COMMUTATIVITY_WEIGHT
     from hamsa.paper.benchmark import METHODS as BENCHMARK_METHODS
 
     parser = argparse.ArgumentParser(

@@ -17,6 +17,15 @@ from hamsa.matching.nearest import nearest_rows
 
 # the coupled functional-map fit solves a dense system of (k_s k_t)^2 entries: 4096 unknowns = 128 MiB
 MAX_COUPLED_UNKNOWNS = 4096
+# the descriptor-commutativity weight of the fits that start the matchers (fmap's and sgfe's HKS map,
+# ICSKM's landmark fit); chosen for fmap on half of the SCAPE pairs, docs/results/matching.md
+COMMUTATIVITY_WEIGHT = 0.03
+
+
+def check_term_weight(term: str, weight) -> None:
+    """Raise a HamsaError unless ``weight`` is a finite number >= 0 (the weight of a fit's ``term``)."""
+    if not (isinstance(weight, (int, float, np.number)) and np.isfinite(weight) and weight >= 0):
+        raise HamsaError(f"the {term} weight must be finite and >= 0, got {weight}")
 
 
 def functional_map(
@@ -54,10 +63,12 @@ def functional_map(
     Raises
     ------
     HamsaError
-        If the descriptors are not (n, d) arrays with the same d on both shapes, an orientation term is asked
-        for without ``meshes`` or with an unknown ``orientation``, or the coupled system has more than
-        :data:`MAX_COUPLED_UNKNOWNS` unknowns.
+        If the descriptors are not (n, d) arrays with the same d on both shapes, a weight is negative or not
+        finite, an orientation term is asked for without ``meshes`` or with an unknown ``orientation``, or
+        the coupled system has more than :data:`MAX_COUPLED_UNKNOWNS` unknowns.
     """
+    check_term_weight("commutativity", commutativity_weight)
+    check_term_weight("orientation", orientation_weight)
     a = source.project(source_descriptors)  # (k_s, d)
     b = target.project(target_descriptors)  # (k_t, d)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1]:

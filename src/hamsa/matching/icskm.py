@@ -6,9 +6,10 @@ embeddings agree up to an orthogonal C (sign flips, rotations within eigenspaces
 heat kernels of known landmark pairs (:func:`landmark_fit`), then runs ICP
 (:func:`hamsa.matching.icp.alternate`) on the embeddings over heat scales from coarse (large t: only the
 first eigenfunctions count) to fine (:class:`KernelICP`). A sign that the landmarks cannot decide
-survives the whole schedule as a partial mirror map, so :func:`match_icskm` also starts from sign-flipped
-fits (:func:`sign_flip_starts`) and through several schedules (:func:`heat_schedules`) and keeps the run
-with the lowest finest-scale ICP energy.
+survives the whole schedule as a partial mirror map, so :func:`match_icskm` starts from two fits (with
+and without a descriptor-commutativity term) and their sign-flipped copies (:func:`sign_flip_starts`),
+through several schedules (:func:`heat_schedules`), and keeps the run with the lowest finest-scale ICP
+energy.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.matching.functional import functional_map
+from hamsa.matching.functional import COMMUTATIVITY_WEIGHT, functional_map
 from hamsa.matching.icp import alternate, procrustes
 from hamsa.matching.nearest import nearest_in, nearest_rows
 from hamsa.matching.signs import intrinsic_symmetry_signs
@@ -68,12 +69,22 @@ def heat_schedules(scales, values: np.ndarray) -> list[np.ndarray]:
     ]
 
 
-def landmark_fit(source: Eigenbasis, target: Eigenbasis, source_landmarks, target_landmarks) -> np.ndarray:
+def landmark_fit(
+    source: Eigenbasis,
+    target: Eigenbasis,
+    source_landmarks,
+    target_landmarks,
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
+) -> np.ndarray:
     """The initial (k, k) C: orthogonal on the first :data:`FIT_SIZE` eigenpairs, the identity beyond.
 
     A functional map (:func:`hamsa.matching.functional_map`) fitted on the first FIT_SIZE eigenpairs to
     the heat kernels of the landmarks ``K_t(., p_l)`` and the HKS at five scales (intrinsic functions that
     correspond on both shapes; each column normalized), then replaced by its nearest orthogonal matrix.
+    With L landmarks these are 5 (L + 1) descriptors for FIT_SIZE^2 unknowns (20 for 400 with three
+    landmarks), so the fit alone leaves C's low block loosely determined; the descriptor-commutativity
+    term (``commutativity_weight``, 0: without it) asks C to carry each descriptor's multiplication
+    operator as well as the descriptor, FIT_SIZE^2 equations per descriptor.
     """
     from hamsa.diffusion import default_hks_times, heat_kernel, heat_kernel_signature
 
@@ -85,22 +96,23 @@ def landmark_fit(source: Eigenbasis, target: Eigenbasis, source_landmarks, targe
     G = np.hstack([heat_kernel(t0, times, target_landmarks).transpose(1, 0, 2).reshape(target.n, -1),
                    heat_kernel_signature(t0, times, scaled=True)])  # fmt: skip
     C = np.eye(source.k)
-    C[:small, :small] = functional_map(s0, t0, F / np.linalg.norm(F, axis=0), G / np.linalg.norm(G, axis=0))
+    F, G = F / np.linalg.norm(F, axis=0), G / np.linalg.norm(G, axis=0)
+    C[:small, :small] = functional_map(s0, t0, F, G, commutativity_weight=commutativity_weight)
     C[:small, :small] = procrustes(C[:small, :small])
     return C
 
 
-def sign_flip_starts(C: np.ndarray, source: Eigenbasis, restarts: int) -> list[np.ndarray]:
-    """``C`` and, for ``restarts`` > 0, copies with the sign of one row flipped: psi_1..psi_restarts (at
-    most FIT_SIZE - 1), and the first eigenfunction the source's intrinsic symmetry reverses
-    (:func:`hamsa.matching.intrinsic_symmetry_signs`), once each."""
-    starts = [C]
+def sign_flip_starts(fits: list[np.ndarray], source: Eigenbasis, restarts: int) -> list[np.ndarray]:
+    """Each C of ``fits`` and, for ``restarts`` > 0, copies of it with the sign of one row flipped:
+    psi_1..psi_restarts (at most FIT_SIZE - 1), and the first eigenfunction the source's intrinsic symmetry
+    reverses (:func:`hamsa.matching.intrinsic_symmetry_signs`), once each."""
     small = min(FIT_SIZE, source.k)
+    flips = set()
     if restarts and source.k > 2:
         signs, _ = intrinsic_symmetry_signs(source, k=small - 1)
         flips = {*range(1, min(int(restarts), small - 1) + 1), int(np.argmax(signs < 0))}
-        starts += [C * np.where(np.arange(source.k) == j, -1.0, 1.0)[:, None] for j in sorted(flips)]
-    return starts
+    rows = np.arange(source.k)
+    return [start for C in fits for start in (C, *(C * np.where(rows == j, -1.0, 1.0)[:, None] for j in sorted(flips)))]
 
 
 @dataclass(frozen=True)
@@ -263,18 +275,22 @@ def match_icskm(
     features: tuple[np.ndarray, np.ndarray] | None = None,
     feature_weight: float = 0.2,
     restarts: int = 5,
+    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
     progress=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
-    Fits C to the landmarks (:func:`landmark_fit`), then runs coarse-to-fine ICP (:class:`KernelICP`) from
-    that fit and from its sign-flipped copies (:func:`sign_flip_starts`), each through every heat schedule
-    of ``scales`` (:func:`heat_schedules`); the run with the lowest finest-scale energy wins
-    (:func:`lowest_energy_run`). No ground truth is used. Where ICP starts and how far it steps from coarse
-    to fine decide which minimum it follows, and on near-isometric humans the right map has the lower
-    energy where it is among the runs, hence several starts and schedules (``docs/results/matching.md``
-    shows what each schedule changes). Works with any basis: the LBO's or a Hamiltonian's (the paper uses
-    V = geodesic distance from the landmarks, :func:`hamsa.geodesic.geodesic_distance`).
+    Fits C to the landmarks (:func:`landmark_fit`) twice, with the descriptor-commutativity term and
+    without it, then runs coarse-to-fine ICP (:class:`KernelICP`) from both fits and from their
+    sign-flipped copies (:func:`sign_flip_starts`), each through every heat schedule of ``scales``
+    (:func:`heat_schedules`); the run with the lowest finest-scale energy wins (:func:`lowest_energy_run`).
+    The term brings the fit closer to the true map on most pairs, but which start ICP turns into the right
+    map varies from pair to pair, so both compete. No ground truth is used. Where ICP starts and how far
+    it steps from coarse to fine decide which minimum it follows, and on near-isometric humans the right
+    map has the lower energy where it is among the runs, hence several starts and schedules
+    (``docs/results/matching.md`` shows what each changes). Works with any basis: the LBO's or a
+    Hamiltonian's (the paper uses V = geodesic distance from the landmarks,
+    :func:`hamsa.geodesic.geodesic_distance`).
 
     Parameters
     ----------
@@ -289,7 +305,10 @@ def match_icskm(
         (:class:`KernelEmbedding`), e.g. geodesic distances from each landmark: they keep the map from
         swapping parts that the kernels alone cannot tell apart (left and right limbs)
     feature_weight : the features' size relative to the embedding's
-    restarts : sign-flipped starts (0 with a single schedule, e.g. ``scales=6``: the paper's single run)
+    restarts : sign-flipped starts of each fit (0 with a single schedule, e.g. ``scales=6``, and
+        ``commutativity_weight=0``: the paper's single run)
+    commutativity_weight : the descriptor-commutativity weight of the landmark fit that starts beside the
+        plain fit (0: the plain fit alone)
     progress : optional ``progress(done, total)``, called after each ICP run (:func:`lowest_energy_run`)
 
     Returns
@@ -300,7 +319,7 @@ def match_icskm(
     ------
     HamsaError
         On bases of different k, landmark lists that are empty, unmatched or not vertex ids, a bad
-        schedule, ``restarts < 0`` or ``iterations < 1``.
+        schedule, ``restarts < 0``, ``iterations < 1`` or a negative or non-finite ``commutativity_weight``.
     """
     if source.k != target.k:
         raise HamsaError(f"ICSKM needs bases of the same size, got k = {source.k} and {target.k}")
@@ -315,11 +334,12 @@ def match_icskm(
     schedules = heat_schedules(scales, source.values)
     if int(iterations) < 1:
         raise HamsaError(f"need at least one ICP iteration, got {iterations}")
-    C = landmark_fit(source, target, p, q)
+    weights = dict.fromkeys((float(commutativity_weight), 0.0))  # with the term, then the plain fit
+    fits = [landmark_fit(source, target, p, q, weight) for weight in weights]
     sampled = np.random.default_rng(seed).choice(source.n, min(sample, source.n), replace=False)
     embedding = KernelEmbedding(source, target, features, feature_weight)
     icp = KernelICP(embedding, p, q, landmark_weight, int(iterations))
-    starts = sign_flip_starts(C, source, restarts)  # once: each start runs through every schedule
+    starts = sign_flip_starts(fits, source, restarts)  # once: each start runs through every schedule
     runs = [(start, times) for times in schedules for start in starts]
     C = lowest_energy_run(icp, runs, sampled, progress)
     finest = embedding.at(schedules[0][-1])  # every schedule ends at the same finest scale

@@ -9,7 +9,15 @@ import numpy as np
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.matching.functional import _operator_ratio, _orientation_operators, functional_map, icp_refine, zoomout
+from hamsa.matching.functional import (
+    COMMUTATIVITY_WEIGHT,
+    _operator_ratio,
+    _orientation_operators,
+    check_term_weight,
+    functional_map,
+    icp_refine,
+    zoomout,
+)
 from hamsa.matching.icskm import match_icskm
 from hamsa.matching.nearest import match_descriptors
 from hamsa.matching.sgfe import match_sgfe
@@ -17,10 +25,8 @@ from hamsa.pointcloud import PointCloud
 from hamsa.repair import orient_faces
 
 METHODS = ("hks", "wks", "fmap", "sgfe", "icskm", "icskm_geo")
-# the functional map that starts fmap and sgfe is fitted on this many eigenpairs
+# the functional map that starts fmap and sgfe is fitted on this many eigenpairs (with COMMUTATIVITY_WEIGHT)
 START_K = 20
-# and with this descriptor-commutativity weight (chosen on half of the SCAPE pairs, docs/results/matching.md)
-COMMUTATIVITY_WEIGHT = 0.03
 # a start fitted with the orientation term replaces the plain one only when its orientation_ratio is below
 # this: at the ground truth of SCAPE pairs the ratio is 0.01-0.2, and near 1 a map is as close to its mirror
 # image as to the asked orientation, so the ratio cannot say which start is right (set on half of the SCAPE
@@ -87,7 +93,8 @@ def match(
         iterations (``sgfe``), ICSKM's ICP runs (``icskm``, ``icskm_geo``); the descriptor methods do not
         call it
     commutativity_weight : the descriptor-commutativity weight of the functional map that starts ``fmap``
-        and ``sgfe`` (:func:`~hamsa.matching.functional_map`; 0: the row-wise fit); the other methods ignore it
+        and ``sgfe``, and of ICSKM's landmark fit (:func:`~hamsa.matching.functional_map`; 0: the row-wise
+        fit); the descriptor methods ignore it
     orientation_weight : the weight of the orientation-preserving term of that functional map, which tells
         a map from its mirror image (a left-right symmetric shape's HKS cannot): the start is fitted with and
         without it, and the term's fit is kept only when it is clearly the better oriented
@@ -117,12 +124,6 @@ def match(
         meshes = tuple(shape if isinstance(shape, PointCloud) else orient_faces(shape) for shape in meshes)  # once
     request = _Request(source, target, landmarks, meshes, progress, commutativity_weight, orientation_weight)
     return _MATCHERS[method](request)
-
-
-def check_term_weight(term: str, weight) -> None:
-    """Raise a HamsaError unless ``weight`` is a finite number >= 0 (a weight of the start map's ``term``)."""
-    if not (isinstance(weight, (int, float, np.number)) and np.isfinite(weight) and weight >= 0):
-        raise HamsaError(f"the {term} weight must be finite and >= 0, got {weight}")
 
 
 def _outward_sign(shape) -> float:
@@ -230,7 +231,12 @@ def _icskm(request, features=None):
     if request.landmarks is None:
         raise HamsaError("icskm needs landmark pairs (source ids, target ids)")
     return match_icskm(
-        request.source, request.target, *request.landmarks, features=features, progress=request.progress
+        request.source,
+        request.target,
+        *request.landmarks,
+        features=features,
+        commutativity_weight=request.commutativity_weight,
+        progress=request.progress,
     )[1]
 
 

@@ -49,7 +49,7 @@ from hamsa.evaluation import TruthDistances, error_curve, evaluated_points, summ
 from hamsa.files import atomic_write
 from hamsa.geodesic import GEODESIC_METHODS, geodesic_distance
 from hamsa.matching import match, matching_potentials, resolve_signs
-from hamsa.matching.pipeline import COMMUTATIVITY_WEIGHT, check_term_weight
+from hamsa.matching.functional import COMMUTATIVITY_WEIGHT, check_term_weight
 from hamsa.mesh import TriMesh
 
 METHODS = ("hks", "wks", "fmap", "icskm", "icskm_geo", "sgfe", "texture")
@@ -156,8 +156,8 @@ def evaluate_pair(
     barely moves the basis and 10-100 starts to localize the low functions near the landmarks.
     ``geodesics``: the distances that score the maps, ``"heat"`` or ``"exact"``
     (:func:`hamsa.evaluation.geodesic_errors`); the landmark potentials always use the heat method.
-    ``commutativity_weight``, ``orientation_weight``: those of the functional map starting ``fmap`` and
-    ``sgfe`` (:func:`hamsa.matching.match`)."""
+    ``commutativity_weight``: that of the functional map starting ``fmap`` and ``sgfe`` and of ICSKM's
+    landmark fit; ``orientation_weight``: that of the ``fmap`` / ``sgfe`` start (:func:`hamsa.matching.match`)."""
     truth = np.asarray(ground_truth)
     if truth.shape != (source.n_vertices,):
         raise HamsaError(f"ground truth has shape {truth.shape}, the source has {source.n_vertices} vertices")
@@ -362,7 +362,7 @@ def benchmark_dataset(
     oracle : build the potentials from the ground truth, as the paper does (:func:`evaluate_pair`); the
         table's ``potentials`` field says which
     geodesics : ``"heat"`` or ``"exact"`` distances for the scores (:func:`evaluate_pair`)
-    commutativity_weight, orientation_weight : those of the functional map starting ``fmap`` and ``sgfe``
+    commutativity_weight, orientation_weight : those of the functional maps that start the methods
         (:func:`evaluate_pair`)
     """
     unknown = set(methods) - set(METHODS)
@@ -387,10 +387,11 @@ def benchmark_dataset(
         settings["oracle"] = True
     if geodesics != "heat":  # (likewise)
         settings["geodesics"] = str(geodesics)
-    if {"fmap", "sgfe"} & set(methods):  # (always: results from before its default was 0.03 had none)
+    # (always: results from before its default was 0.03 had none)
+    if {"fmap", "sgfe", "icskm", "icskm_geo"} & set(methods):
         settings["commutativity_weight"] = float(commutativity_weight)
-        if orientation_weight:  # (0, the default, stays out of the key: earlier results remain valid)
-            settings["orientation_weight"] = float(orientation_weight)
+    if {"fmap", "sgfe"} & set(methods) and orientation_weight:  # (0, the default, stays out of the key)
+        settings["orientation_weight"] = float(orientation_weight)
     key = _settings_key(settings)
     todo, records = [], []
     for source, target in dataset_pairs(dataset, limit):
@@ -469,7 +470,7 @@ def table_markdown(table: dict) -> str:
     notes = {
         "potentials": "Hamiltonian potentials",
         "geodesics": "Geodesic errors",
-        "commutativity_weight": "Descriptor-commutativity weight of the fmap / sgfe start",
+        "commutativity_weight": "Descriptor-commutativity weight of the fmap / sgfe start and the ICSKM landmark fit",
         "orientation_weight": "Orientation-preserving weight of that start",
     }
     lines = [f"{label}: {table[key]}." for key, label in notes.items() if key in table]
