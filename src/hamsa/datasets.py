@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hamsa.cache import content_key
+from hamsa.cache import code_fingerprint, content_key
 from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError
 from hamsa.io import load_mesh
@@ -137,10 +137,11 @@ def load_scape(root) -> Dataset:
 
 
 def basis_key(mesh, k: int, potential=None, mass: str = "voronoi") -> str:
-    """A hex digest identifying (mesh, potential, k, mass): the cache key of :func:`cached_eigenbasis`."""
+    """A hex digest identifying (mesh, potential, k, mass) and the code that solves it
+    (:func:`~hamsa.cache.code_fingerprint`): the cache key of :func:`cached_eigenbasis`."""
     mesh = as_trimesh(mesh)
     V = np.zeros(0) if potential is None else np.asarray(potential, dtype=np.float64)
-    return content_key(mesh.vertices, mesh.faces, V, {"k": int(k), "mass": mass})
+    return content_key(code_fingerprint(), mesh.vertices, mesh.faces, V, {"k": int(k), "mass": mass})
 
 
 def cached_eigenbasis(mesh, k: int, cache_dir, potential=None, mass: str = "voronoi") -> Eigenbasis:

@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hamsa import __version__, potentials
-from hamsa.cache import content_key, load_record, save_record
+from hamsa import potentials
+from hamsa.cache import code_fingerprint, content_key, load_record, save_record
 from hamsa.datasets import Dataset, cached_eigenbasis
 from hamsa.eigen import eigenbasis
 from hamsa.errors import HamsaError
@@ -313,7 +313,7 @@ def _run_pair_or_failure(dataset: Dataset, source_name: str, target_name: str, s
 
 
 def _settings_key(settings: dict) -> str:
-    return content_key(__version__, {k: v for k, v in settings.items() if k != "cache"})
+    return content_key(code_fingerprint(), {k: v for k, v in settings.items() if k != "cache"})
 
 
 def _finished(path: Path, key: str) -> dict | None:

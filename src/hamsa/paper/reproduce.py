@@ -19,14 +19,13 @@ from __future__ import annotations
 import base64
 import hashlib
 import html
-import inspect
 import time
 import traceback
 from pathlib import Path
 from types import SimpleNamespace
 
 from hamsa import __version__
-from hamsa.cache import content_key, load_record, save_record
+from hamsa.cache import code_fingerprint, content_key, load_record, save_record
 from hamsa.errors import HamsaError
 from hamsa.files import atomic_write
 from hamsa.paper.claims import evaluate_claims
@@ -40,9 +39,9 @@ def _sha256(path: Path) -> str:
 
 
 def input_key(experiment: Experiment, data: str | None, quick: bool) -> str:
-    """Hash of everything an experiment's result depends on: version, source code, data folder, quick."""
-    sources = inspect.getsource(experiment.module()), inspect.getsource(common)
-    return content_key(__version__, *sources, [str(Path(data).resolve()) if data else None, bool(quick)])
+    """Hash of everything an experiment's result depends on: hamsa's source (:func:`~hamsa.cache.code_fingerprint`,
+    the experiment's module included), the experiment, the data folder, quick."""
+    return content_key(code_fingerprint(), experiment.name, [str(Path(data).resolve()) if data else None, bool(quick)])
 
 
 def _output_files(output: Path, experiment: Experiment) -> list[Path]:
