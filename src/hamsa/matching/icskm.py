@@ -3,7 +3,7 @@
 The heat kernel ``K_t(x, y) = sum_i e^{-E_i t} psi_i(x) psi_i(y)`` of each shape is the Gram matrix of
 the spectral embedding ``e_t(x) = (e^{-E_i t / 2} psi_i(x))_i``; for a near-isometry the two shapes'
 embeddings agree up to an orthogonal C (sign flips, rotations within eigenspaces). ICSKM fits C to the
-heat kernels of known landmark pairs (:func:`landmark_fit`), then runs ICP
+heat kernels of known landmark pairs (:func:`landmark_fits`), then runs ICP
 (:func:`hamsa.matching.icp.alternate`) on the embeddings over heat scales from coarse (large t: only the
 first eigenfunctions count) to fine (:class:`KernelICP`). A sign that the landmarks cannot decide
 survives the whole schedule as a partial mirror map, so :func:`match_icskm` starts from two fits (with
@@ -69,37 +69,38 @@ def heat_schedules(scales, values: np.ndarray) -> list[np.ndarray]:
     ]
 
 
-def landmark_fit(
-    source: Eigenbasis,
-    target: Eigenbasis,
-    source_landmarks,
-    target_landmarks,
-    commutativity_weight: float = COMMUTATIVITY_WEIGHT,
-) -> np.ndarray:
-    """The initial (k, k) C: orthogonal on the first :data:`FIT_SIZE` eigenpairs, the identity beyond.
+def landmark_fits(
+    source: Eigenbasis, target: Eigenbasis, source_landmarks, target_landmarks, commutativity_weights
+) -> list[np.ndarray]:
+    """The initial (k, k) C for each weight of ``commutativity_weights``: orthogonal on the first
+    :data:`FIT_SIZE` eigenpairs, the identity beyond.
 
     A functional map (:func:`hamsa.matching.functional_map`) fitted on the first FIT_SIZE eigenpairs to
     the heat kernels of the landmarks ``K_t(., p_l)`` and the HKS at five scales (intrinsic functions that
-    correspond on both shapes; each column normalized), then replaced by its nearest orthogonal matrix.
-    With L landmarks these are 5 (L + 1) descriptors for FIT_SIZE^2 unknowns (20 for 400 with three
-    landmarks), so the fit alone leaves C's low block loosely determined; the descriptor-commutativity
-    term (``commutativity_weight``, 0: without it) asks C to carry each descriptor's multiplication
-    operator as well as the descriptor, FIT_SIZE^2 equations per descriptor.
+    correspond on both shapes; each column normalized; built once for all weights), then replaced by its
+    nearest orthogonal matrix. With L landmarks these are 5 (L + 1) descriptors for FIT_SIZE^2 unknowns
+    (20 for 400 with three landmarks), so the fit alone leaves C's low block loosely determined; the
+    descriptor-commutativity term (its weight; 0: without it) asks C to carry each descriptor's
+    multiplication operator as well as the descriptor, FIT_SIZE^2 equations per descriptor.
     """
     from hamsa.diffusion import default_hks_times, heat_kernel, heat_kernel_signature
 
     small = min(FIT_SIZE, source.k)
     s0, t0 = source.truncate(small), target.truncate(small)
     times = default_hks_times(s0, 5)
-    F = np.hstack([heat_kernel(s0, times, source_landmarks).transpose(1, 0, 2).reshape(source.n, -1),
-                   heat_kernel_signature(s0, times, scaled=True)])  # fmt: skip
-    G = np.hstack([heat_kernel(t0, times, target_landmarks).transpose(1, 0, 2).reshape(target.n, -1),
-                   heat_kernel_signature(t0, times, scaled=True)])  # fmt: skip
-    C = np.eye(source.k)
-    F, G = F / np.linalg.norm(F, axis=0), G / np.linalg.norm(G, axis=0)
-    C[:small, :small] = functional_map(s0, t0, F, G, commutativity_weight=commutativity_weight)
-    C[:small, :small] = procrustes(C[:small, :small])
-    return C
+
+    def descriptors(basis, landmarks):
+        F = np.hstack([heat_kernel(basis, times, landmarks).transpose(1, 0, 2).reshape(basis.n, -1),
+                       heat_kernel_signature(basis, times, scaled=True)])  # fmt: skip
+        return F / np.linalg.norm(F, axis=0)
+
+    F, G = descriptors(s0, source_landmarks), descriptors(t0, target_landmarks)
+    fits = []
+    for weight in commutativity_weights:
+        C = np.eye(source.k)
+        C[:small, :small] = procrustes(functional_map(s0, t0, F, G, commutativity_weight=weight))
+        fits.append(C)
+    return fits
 
 
 def sign_flip_starts(fits: list[np.ndarray], source: Eigenbasis, restarts: int) -> list[np.ndarray]:
@@ -233,10 +234,14 @@ class KernelICP:
 def lowest_energy_run(icp: KernelICP, runs: list, sampled: np.ndarray, progress=None) -> np.ndarray:
     """The C of the (start, schedule) run that ends with the lowest energy on the ICP sample ``sampled``.
 
-    With several runs, all are first compared on a third of the sample; those within :data:`NEAR_TIE` of
-    the lowest energy there are run on the whole sample, where the lowest wins. Runs that reach a state an
-    earlier one passed through stop there (:meth:`KernelICP.run`). ``progress(done, total)`` is called after
-    each run (the total grows once the runs kept for the whole sample are known).
+    A single run goes through its schedule on the whole sample. Several runs first go through their
+    schedules on a third of the sample (runs that reach a state an earlier one passed through stop there,
+    :meth:`KernelICP.run`); each of those within :data:`NEAR_TIE` of the lowest energy there is decided on
+    the whole sample twice: run again from its start through its schedule, and continued from the C it
+    reached, with ICP at the finest scale. From the same start the third and the whole sample can follow a
+    schedule into different minima, so both the start and the minimum the third found compete; the lowest
+    energy wins. ``progress(done, total)`` is called after each run (the total grows once the runs kept for
+    the whole sample are known).
     """
     done, total = 0, len(runs)
 
@@ -244,20 +249,26 @@ def lowest_energy_run(icp: KernelICP, runs: list, sampled: np.ndarray, progress=
         if progress is not None:
             progress(done, total)
 
-    if len(runs) > 1:
-        explored, visited = sampled[: max(len(sampled) // 3, 1)], {}
-        ranked = {}  # energy on the explored third -> the first run that ended there
-        for start, times in runs:
-            ranked.setdefault(icp.run(start, times, explored, visited)[1], (start, times))
-            done += 1
-            report()
-        runs = [run for energy, run in ranked.items() if energy <= NEAR_TIE * min(ranked)]
-        total += len(runs)
-    finished, results = {}, []
-    for start, times in runs:
-        results.append(icp.run(start, times, sampled, finished))
+    if len(runs) == 1:
+        C = icp.run(*runs[0], sampled)[0]
         done += 1
         report()
+        return C
+    explored, visited = sampled[: max(len(sampled) // 3, 1)], {}
+    ranked = {}  # energy on the explored third -> the first run that ended there, and the C it reached
+    for start, times in runs:
+        reached, energy = icp.run(start, times, explored, visited)
+        ranked.setdefault(energy, (start, times, reached))
+        done += 1
+        report()
+    kept = [run for energy, run in ranked.items() if energy <= NEAR_TIE * min(ranked)]
+    total += 2 * len(kept)
+    finished, results = {}, []
+    for start, times, reached in kept:
+        for C, schedule in ((start, times), (reached, times[-1:])):
+            results.append(icp.run(C, schedule, sampled, finished))
+            done += 1
+            report()
     return min(results, key=lambda result: result[1])[0]
 
 
@@ -280,7 +291,7 @@ def match_icskm(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Iterative closest spectral kernel maps (Shtern & Kimmel 2014), started from landmark pairs.
 
-    Fits C to the landmarks (:func:`landmark_fit`) twice, with the descriptor-commutativity term and
+    Fits C to the landmarks (:func:`landmark_fits`) twice, with the descriptor-commutativity term and
     without it, then runs coarse-to-fine ICP (:class:`KernelICP`) from both fits and from their
     sign-flipped copies (:func:`sign_flip_starts`), each through every heat schedule of ``scales``
     (:func:`heat_schedules`); the run with the lowest finest-scale energy wins (:func:`lowest_energy_run`).
@@ -335,7 +346,7 @@ def match_icskm(
     if int(iterations) < 1:
         raise HamsaError(f"need at least one ICP iteration, got {iterations}")
     weights = dict.fromkeys((float(commutativity_weight), 0.0))  # with the term, then the plain fit
-    fits = [landmark_fit(source, target, p, q, weight) for weight in weights]
+    fits = landmark_fits(source, target, p, q, weights)
     sampled = np.random.default_rng(seed).choice(source.n, min(sample, source.n), replace=False)
     embedding = KernelEmbedding(source, target, features, feature_weight)
     icp = KernelICP(embedding, p, q, landmark_weight, int(iterations))
