@@ -227,7 +227,8 @@ def test_icskm_runs_that_nearly_tie_on_a_third_are_restarted_and_continued_on_th
     on_whole = {0: 2.5, 1: 3.5, 100: 3.0, 101: 2.0}
 
     class RecordingICP:
-        calls = []
+        def __init__(self):
+            self.calls = []
 
         def run(self, C, times, rows, visited=None):
             self.calls.append((float(C[0, 0]), tuple(times), len(rows)))
