@@ -285,7 +285,7 @@ def match_icskm(
     seed: int = 0,
     features: tuple[np.ndarray, np.ndarray] | None = None,
     feature_weight: float = 0.2,
-    restarts: int = 5,
+    restarts: int = 10,
     commutativity_weight: float = COMMUTATIVITY_WEIGHT,
     progress=None,
 ) -> tuple[np.ndarray, np.ndarray]:
