@@ -480,3 +480,68 @@ def test_the_orientation_term_turns_a_mirrored_cloud_map_into_the_right_one(huma
         return hamsa.evaluation.summary(hamsa.evaluation.geodesic_errors(posed, mapping[points], truth[points]))["auc"]
 
     assert auc(0.0) < 0.3 and auc(0.03) > 0.85  # measured 0.188 and 0.930
+
+
+def _with_strays(mesh, seed=0):
+    """The vertices of ``mesh`` with six single points and one pair appended, each at least 20 spacings from
+    the surface (outward along a vertex normal): (points, indices of the appended ones)."""
+    points = mesh.vertices
+    spacing = np.median(cKDTree(points).query(points, 2)[0][:, 1])
+    rng = np.random.default_rng(seed)
+    candidates = points[:, None] + spacing * np.array([25.0, 40.0])[:, None] * mesh.vertex_normals[:, None]
+    candidates = candidates[rng.permutation(len(points))].reshape(-1, 3)
+    far = candidates[cKDTree(points).query(candidates)[0] > 20 * spacing]
+    chosen = []
+    for point in far:  # apart from one another as well, so each is its own group
+        if all(np.linalg.norm(point - c) > 20 * spacing for c in chosen):
+            chosen.append(point)
+        if len(chosen) == 7:
+            break
+    pair = chosen[6] + [spacing, 0, 0]  # the seventh comes with a neighbour one spacing away
+    strays = np.vstack([chosen, pair])
+    return np.vstack([points, strays]), len(points) + np.arange(len(strays))
+
+
+def test_stray_points_are_found_and_each_adds_a_spurious_low_eigenpair():
+    from hamsa.errors import InputWarning
+    from hamsa.pointcloud import stray_points
+
+    mesh = hamsa.shapes.humanoid().scaled_to_unit_area()
+    points, appended = _with_strays(mesh)
+    np.testing.assert_array_equal(stray_points(points), appended)
+    cloud = hamsa.PointCloud(points)
+    np.testing.assert_array_equal(cloud.stray_points, appended)
+    with pytest.warns(InputWarning, match="8 stray points"):
+        values = hamsa.eigenbasis(cloud, 20).values
+    clean = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 20).values
+    # eight spurious pairs below the clean cloud's 20th eigenvalue: the spectrum shifts down by about eight places
+    assert np.sum(values < clean[-1]) >= 19 and values[8] < 0.9 * clean[8], (values, clean)
+
+
+def test_clean_clouds_have_no_stray_points_whatever_their_density():
+    from hamsa.pointcloud import stray_points
+
+    rng = np.random.default_rng(1)
+    for mesh in (hamsa.shapes.humanoid(), hamsa.shapes.hand("curled"), hamsa.shapes.torus(), hamsa.shapes.sphere()):
+        points = mesh.vertices
+        assert len(stray_points(points)) == 0
+        assert len(stray_points(points[rng.random(len(points)) < 0.5])) == 0  # uneven: a random half
+    assert len(stray_points(rng.random((16, 3)))) == 0  # too few points to tell
+
+
+@pytest.mark.data
+def test_stray_points_on_real_shapes_are_only_vertices_that_no_face_uses():
+    """TOSCA's meshes change density up to tenfold between neighbouring regions (david, centaur): none of their
+    vertices is stray; gorilla1's hundreds of loose vertices next to the surface are, and only they."""
+    from hamsa.pointcloud import stray_points
+
+    from conftest import data_mesh
+
+    rng = np.random.default_rng(2)
+    for name in ("scape/meshes/mesh000", "tosca_hires/meshes/david0", "tosca_hires/meshes/centaur0"):
+        points = data_mesh(f"{name}.off.gz").vertices
+        assert len(stray_points(points)) == 0, name
+        assert len(stray_points(points[rng.random(len(points)) < 0.5])) == 0, name
+    gorilla = data_mesh("tosca_hires/meshes/gorilla1.off.gz")
+    stray = stray_points(gorilla.vertices)
+    assert len(stray) > 300 and np.isin(stray, gorilla.unreferenced_vertices).all()

@@ -136,3 +136,43 @@ def test_orient_faces_restores_the_outward_faces_and_keeps_the_vertices(ico):
     np.testing.assert_array_equal(oriented.faces, ico.faces)  # every face as it was, outward
     inward = orient_faces(hamsa.TriMesh(ico.vertices, np.vstack([ico.faces[:1], ico.faces[1:, ::-1]])))
     np.testing.assert_array_equal(inward.faces, ico.faces)  # a closed piece is turned outward
+
+
+def test_a_point_cloud_repair_drops_nan_repeated_and_stray_points_and_keeps_the_way_back(tmp_path, capsys):
+    pytest.importorskip("robust_laplacian", reason="point clouds need the [pointcloud] extra")
+    from test_pointcloud import _with_strays
+
+    from hamsa.io import load_point_cloud
+    from hamsa.repair import repair_point_cloud
+
+    mesh = shapes.humanoid().scaled_to_unit_area()
+    points, strays = _with_strays(mesh)
+    messy = np.vstack([points[:100], [[np.nan, 0.0, 0.0]], points[100:], points[[5, 7]], [[0.0, np.inf, 1.0]]])
+    cloud, kept, report = repair_point_cloud(messy)
+    assert (report.non_finite_points, report.repeated_points, report.stray_points) == (2, 2, len(strays))
+    assert str(report) == f"repaired: 2 non finite points, 2 repeated points, {len(strays)} stray points"
+    np.testing.assert_array_equal(messy[kept], mesh.vertices)  # the humanoid's vertices, in their order
+    np.testing.assert_array_equal(cloud.points, mesh.vertices)
+    clean, same, nothing = repair_point_cloud(mesh.vertices, neighbors=20)
+    assert not nothing.changed and clean.neighbors == 20
+    np.testing.assert_array_equal(same, np.arange(mesh.n_vertices))
+
+    path = tmp_path / "scan.xyz"
+    np.savetxt(path, messy)
+    with pytest.raises(MeshError, match="non-finite coordinates"):
+        load_point_cloud(path)
+    with pytest.warns(RepairWarning, match="2 repeated points"):
+        assert load_point_cloud(path, repair=True).n_vertices == mesh.n_vertices
+    assert main(["info", str(path)]) == 2
+    assert "non-finite" in capsys.readouterr().err
+    np.savetxt(path, points)
+    assert main(["info", str(path)]) == 0
+    assert f"stray points    {len(strays)} ({strays[0]}, " in capsys.readouterr().out
+    np.savetxt(path, messy)
+    out = tmp_path / "scan.npz"
+    assert main(["basis", str(path), "-k", "6", "--repair", "-o", str(out)]) == 0
+    assert "outputs give input vertex ids" in capsys.readouterr().out
+    with np.load(out) as saved:
+        np.testing.assert_array_equal(saved["vertex_ids"], kept)
+    reference = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 6).values
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, reference, rtol=1e-8, atol=1e-10)

@@ -15,6 +15,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -49,7 +50,8 @@ def _nonnegative_float(text: str) -> float:
 
 REPAIR_HELP = (
     "fix what has one right fix (duplicate or degenerate faces, non-manifold vertices, orientation, unreferenced "
-    "vertices) and keep the largest connected component, instead of refusing the mesh"
+    "vertices) and keep the largest connected component, instead of refusing the mesh; of a point cloud, drop "
+    "the points with NaN coordinates, repeated points and stray points far off the surface"
 )
 
 
@@ -153,17 +155,19 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     from hamsa.pointcloud import PointCloud
 
     if repair:
-        if (point_format(path) or ("",))[0] in POINTS_ONLY:
-            raise HamsaError(f"'{path}' is a point cloud: --repair is for meshes")
-        from hamsa.io import read_mesh_arrays
-        from hamsa.repair import repair_mesh
+        from hamsa.io import read_mesh_arrays, read_point_array
+        from hamsa.repair import repair_mesh, repair_point_cloud
 
-        vertices, faces = read_mesh_arrays(path)
-        mesh, kept, report = repair_mesh(vertices, faces, keep="largest")
+        points_only = (point_format(path) or ("",))[0] in POINTS_ONLY
+        vertices, faces = (read_point_array(path), None) if points_only else read_mesh_arrays(path)
+        if faces is None or (len(faces) == 0 and point_format(path) is not None):
+            shape, kept, report = repair_point_cloud(vertices, **(cloud or {}))
+        else:
+            shape, kept, report = repair_mesh(vertices, faces, keep="largest")
         if not report.changed:
-            return _Loaded(mesh, None, len(vertices))
+            return _Loaded(shape, None, len(vertices))
         print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
-        return _Loaded(mesh, kept, len(vertices))
+        return _Loaded(shape, kept, len(vertices))
     tufted = laplacian == "tufted"
     mesh = load_shape(path, manifold=not tufted, **(cloud or {}))
     if isinstance(mesh, PointCloud):
@@ -562,7 +566,8 @@ def _output_path(args, suffix: str | None = None, *inputs) -> Path:
 
 def _info(args) -> None:
     from hamsa.io import load_shape
-    from hamsa.pointcloud import PointCloud
+    from hamsa.mesh import format_ids
+    from hamsa.pointcloud import STRAY_JUMP, PointCloud
 
     mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
     _check_cloud_options(args, mesh)
@@ -574,6 +579,16 @@ def _info(args) -> None:
         print(f"bounding box    diagonal {cloud.bounding_box_diagonal:.6g}")
         print(f"mean spacing    {cloud.mean_spacing:.6g}")
         print(f"components      {cloud.n_components}")
+        stray = cloud.stray_points
+        print(
+            f"stray points    {len(stray)}"
+            + (
+                f" ({format_ids(stray)}: more than {STRAY_JUMP:g} local spacings off the rest, each adds a spurious "
+                "low eigenpair; --repair drops them)"
+                if len(stray)
+                else ""
+            )
+        )
         if cloud.separate_sheets:
             pairs = cloud.n_vertices * cloud.neighbors
             rule = "normals apart" + (
@@ -1153,6 +1168,20 @@ def _terminate_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
+def _warning_line(command: str):
+    """A ``warnings.showwarning`` that prints hamsa's warnings as one line naming the command (the message says
+    what to do) and leaves other libraries' warnings as Python prints them."""
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if category.__module__.startswith("hamsa"):
+            print(f"{command}: warning: {message}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code: 0, 2 for bad input (one line on stderr naming it), 3 when a
     solver did not converge, 130 on Ctrl-C, 1 for an operating-system error (e.g. disk full)."""
@@ -1174,7 +1203,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
         command = f"hamsa {args.command}"
-        with _terminate_as_interrupt():
+        with _terminate_as_interrupt(), warnings.catch_warnings():
+            warnings.showwarning = _warning_line(command)
             handlers[args.command](args)
     except _Terminated:
         print(f"{command}: terminated", file=sys.stderr)

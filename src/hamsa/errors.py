@@ -47,6 +47,11 @@ class RepairWarning(UserWarning):
     """A mesh was changed by an explicit ``repair=True`` request; the message says what changed."""
 
 
+class InputWarning(UserWarning):
+    """An input is valid but likely to give a misleading result (e.g. stray points in a cloud); the message
+    says why and what removes the cause."""
+
+
 class ResourceError(HamsaError, MemoryError):
     """A request would not fit in this machine's memory; the message says how much it needs."""
 

@@ -82,15 +82,38 @@ def load_point_cloud(
     *,
     separate_sheets: bool = True,
     off_sheet: float | None = None,
+    repair: bool = False,
 ) -> PointCloud:
     """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
     or commas; further columns such as normals or colours are ignored), ``.npy`` ((n, 3) or wider), or the
     vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
 
     Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
-    :class:`~hamsa.pointcloud.PointCloud`. Raises MeshError naming the file if it cannot be read or parsed, or if
-    the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few, NaN, repeated).
+    :class:`~hamsa.pointcloud.PointCloud`. ``repair=True`` drops non-finite, repeated and stray points
+    (:func:`hamsa.repair.repair_point_cloud`; use it directly for the index map) with a
+    :class:`~hamsa.errors.RepairWarning` saying what it dropped. Raises MeshError naming the file if it cannot
+    be read or parsed, or if the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few,
+    NaN, repeated).
     """
+    points = read_point_array(path)
+    options = {"neighbors": neighbors, "separate_sheets": separate_sheets, "off_sheet": off_sheet}
+    try:
+        if not repair:
+            return PointCloud(points, **options)
+        from hamsa.repair import repair_point_cloud
+
+        cloud, _, report = repair_point_cloud(points, **options)
+    except MeshError as exc:
+        raise _naming(path, exc) from None
+    if report.changed:
+        warnings.warn(f"'{path}': {report}", RepairWarning, stacklevel=2)
+    return cloud
+
+
+def read_point_array(path: str | os.PathLike) -> np.ndarray:
+    """The raw (n, 3) float64 points of a point file, as :func:`load_point_cloud` reads them, before any
+    validation (for inspecting or repairing a cloud it refuses). Raises MeshError naming the file if it cannot
+    be read or parsed."""
     fmt = point_format(path)
     if fmt is None:
         raise MeshError(
@@ -102,22 +125,18 @@ def load_point_cloud(
             points = load_array(path, ndim=2)
             if points.shape[1] < 3:
                 raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
-            points = points[:, :3]
-        elif kind in ("xyz", "pts", "txt"):
+            return np.asarray(points[:, :3], dtype=np.float64)
+        if kind in ("xyz", "pts", "txt"):
             text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8")
             lines = [line.replace(",", " ") for line in _data_lines(text)]
             if not lines:
                 raise MeshError("no points in the file")
-            points = _fixed_width(lines, 3, "point")
-        else:
-            points = read_mesh_arrays(path)[0]
-        return PointCloud(points, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
+            return _fixed_width(lines, 3, "point")
+        return read_mesh_arrays(path)[0]
     except FileAccessError as exc:
         raise MeshError(str(exc)) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
-    except MeshError as exc:
-        raise _naming(path, exc) from None
 
 
 def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:

@@ -26,6 +26,7 @@ smooth sheet, whatever the normals say. Use the mesh when there is one.
 
 from __future__ import annotations
 
+import warnings
 from functools import cached_property
 
 import numpy as np
@@ -33,7 +34,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from hamsa.errors import MeshError, MissingDependencyError
+from hamsa.errors import InputWarning, MeshError, MissingDependencyError
 from hamsa.mesh import TriMesh, as_coordinates, as_trimesh, check_coordinates, format_ids
 
 DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & Crane's default)
@@ -42,6 +43,8 @@ GRADIENT_NEIGHBORS = 10
 _NORMAL_ROUNDS = 2  # rounds of re-estimating the normals from the local triangulation's stars
 _REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
 _FIT_ROUNDS = 8  # reweighting rounds of the robust quadratic fit of a point's sheet (``off_sheet``)
+STRAY_NEIGHBORS = 8  # nearest points linked in the stray-point test; larger groups are parts of the cloud
+STRAY_JUMP = 15.0  # local spacings: a longer link does not join a point to the rest (:func:`stray_points`)
 
 
 class PointCloud:
@@ -111,7 +114,8 @@ class PointCloud:
             i = int(repeated[0])
             raise MeshError(
                 f"{len(repeated)} points repeat another point exactly ({format_ids(repeated)}; point {i} equals point "
-                f"{int(nearest[i, 1]) if nearest[i, 1] != i else int(nearest[i, 0])}): remove the duplicates"
+                f"{int(nearest[i, 1]) if nearest[i, 1] != i else int(nearest[i, 0])}): remove the duplicates "
+                "(hamsa.repair.repair_point_cloud; --repair on the command line)"
             )
         points.flags.writeable = False
         self._points = points
@@ -148,7 +152,17 @@ class PointCloud:
         With ``separate_sheets`` the local triangulations are hamsa's own (:attr:`local_triangles`: each
         point's Delaunay star among the neighbours on its own sheet) and robust_laplacian builds the tufted
         intrinsic Delaunay operators of their union, each triangle weighted 1/3 as in Sharp & Crane;
-        without, it is robust_laplacian's ``point_cloud_laplacian`` (all ``neighbors`` nearest points)."""
+        without, it is robust_laplacian's ``point_cloud_laplacian`` (all ``neighbors`` nearest points).
+        Warns (:class:`~hamsa.errors.InputWarning`) when the cloud has :attr:`stray_points`."""
+        stray = self.stray_points
+        if len(stray):
+            warnings.warn(
+                f"{len(stray)} stray points ({format_ids(stray)}) lie more than {STRAY_JUMP:g} local spacings from "
+                "the rest of the cloud: each adds a spurious low eigenpair localized on it; "
+                "hamsa.repair.repair_point_cloud (--repair on the command line) drops them",
+                InputWarning,
+                stacklevel=2,
+            )
         try:
             import robust_laplacian
         except ImportError:
@@ -301,6 +315,15 @@ class PointCloud:
         return float(np.linalg.norm(self._points.max(axis=0) - self._points.min(axis=0)))
 
     @cached_property
+    def stray_points(self) -> np.ndarray:
+        """Indices (ascending) of the points :func:`stray_points` finds: isolated points and small groups off
+        the sampled surface, such as scanner outliers (read-only; empty for a clean cloud)."""
+        nearest = self._neighbourhoods if self.neighbors >= STRAY_NEIGHBORS else None
+        stray = stray_points(self._points, nearest)
+        stray.flags.writeable = False
+        return stray
+
+    @cached_property
     def vertex_components(self) -> tuple[int, np.ndarray]:
         """(count, labels (n,)): pieces of the cloud that the Laplacian's neighbourhoods do not join."""
         count, labels = connected_components(self.operators[0], directed=False)
@@ -393,6 +416,45 @@ class PointCloud:
             separate_sheets=self.separate_sheets,
             off_sheet=self.off_sheet,
         )
+
+
+def stray_points(points, nearest: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Indices (ascending) of the stray points of a cloud: groups of at most :data:`STRAY_NEIGHBORS` points that
+    reach the rest only by links longer than :data:`STRAY_JUMP` local spacings.
+
+    Each point is linked to its :data:`STRAY_NEIGHBORS` nearest points; a link of length L between p and q
+    holds when ``L <= STRAY_JUMP * max(s_p, s_q)``, where a point's local spacing s is the median, over its
+    linked neighbours, of their distances to their own nearest points (so the test follows the sampling
+    density, and a point off the surface takes the spacing of the surface beneath it). The pieces the links
+    that hold make with at most :data:`STRAY_NEIGHBORS` points are stray; larger pieces are parts of the
+    cloud. A stray point has no surface around it: the point-cloud Laplacian gives it a large mass and
+    weak links, so the spectrum gets a spurious low eigenpair localized on it for each. Points nearer the
+    surface than the jump are not found (they act like noise on the operator, or do harm undetected).
+
+    Parameters
+    ----------
+    points : (n, 3) array
+    nearest : optional ``(distances, indices)`` of each point's nearest points, itself first, at least
+        ``STRAY_NEIGHBORS + 1`` columns (a cloud's own neighbourhoods, to avoid a second query).
+
+    Returns
+    -------
+    (s,) int64 array; empty when the cloud has no more than ``2 * STRAY_NEIGHBORS`` points (too few to tell).
+    """
+    points = as_coordinates(points, "points")
+    n = len(points)
+    if n <= 2 * STRAY_NEIGHBORS:
+        return np.zeros(0, dtype=np.int64)
+    if nearest is None:
+        nearest = cKDTree(points).query(points, k=STRAY_NEIGHBORS + 1)
+    distances, indices = nearest[0][:, 1 : STRAY_NEIGHBORS + 1], nearest[1][:, 1 : STRAY_NEIGHBORS + 1]
+    spacing = np.median(nearest[0][:, 1][indices], axis=1)
+    rows = np.repeat(np.arange(n), STRAY_NEIGHBORS)
+    columns = indices.ravel()
+    holds = distances.ravel() <= STRAY_JUMP * np.maximum(spacing[rows], spacing[columns])
+    links = sp.csr_matrix((np.ones(int(holds.sum())), (rows[holds], columns[holds])), shape=(n, n))
+    _, labels = connected_components(links, directed=False)
+    return np.flatnonzero(np.bincount(labels)[labels] <= STRAY_NEIGHBORS).astype(np.int64)
 
 
 def _tangent_frames(normals: np.ndarray) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Repairs with one right answer: what ``load_mesh(..., repair=True)`` and ``hamsa ... --repair`` do.
+"""Repairs with one right answer: what ``load_mesh(..., repair=True)``, ``load_point_cloud(..., repair=True)``
+and ``hamsa ... --repair`` do.
 
 By default hamsa refuses defective meshes with a :class:`~hamsa.errors.MeshError` naming the defect.
 Some defects have a well-defined fix that changes nothing a user could want kept:
@@ -16,22 +17,39 @@ What has no single right answer is still refused: non-finite or huge coordinates
 range, zero-area faces with distinct vertices, non-manifold edges, non-orientable surfaces.
 Vertex indices change only by removal and appending: ``kept[i]`` is the original index of new
 vertex i, so ground-truth correspondences can be carried over.
+
+A point cloud (:func:`repair_point_cloud`) loses its points with non-finite coordinates (the empty rows of
+a scan), repeated points (keeping the first) and stray points (:func:`hamsa.pointcloud.stray_points`:
+isolated points and small groups far off the surface, each of which would add a spurious low eigenpair).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from hamsa.errors import MeshError
-from hamsa.mesh import TriMesh, as_trimesh
+from hamsa.mesh import TriMesh, as_coordinates, as_trimesh
+from hamsa.pointcloud import PointCloud, stray_points
+
+
+class _Counts:
+    """A repair's report: one count per kind of change (all zeros: the input was already clean)."""
+
+    @property
+    def changed(self) -> bool:
+        return any(getattr(self, field.name) for field in fields(self))
+
+    def __str__(self) -> str:
+        parts = [f"{getattr(self, f.name)} {f.name.replace('_', ' ')}" for f in fields(self) if getattr(self, f.name)]
+        return "repaired: " + ", ".join(parts) if parts else "nothing to repair"
 
 
 @dataclass(frozen=True)
-class RepairReport:
+class RepairReport(_Counts):
     """What :func:`repair_mesh` changed (all zeros: the mesh was already clean)."""
 
     degenerate_faces: int = 0
@@ -41,13 +59,14 @@ class RepairReport:
     dropped_components: int = 0
     unreferenced_vertices: int = 0
 
-    @property
-    def changed(self) -> bool:
-        return any(getattr(self, name) for name in self.__dataclass_fields__)
 
-    def __str__(self) -> str:
-        parts = [f"{value} {name.replace('_', ' ')}" for name, value in vars(self).items() if value]
-        return "repaired: " + ", ".join(parts) if parts else "nothing to repair"
+@dataclass(frozen=True)
+class PointCloudRepairReport(_Counts):
+    """What :func:`repair_point_cloud` dropped (all zeros: the cloud was already clean)."""
+
+    non_finite_points: int = 0
+    repeated_points: int = 0
+    stray_points: int = 0
 
 
 def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray, RepairReport]:
@@ -94,6 +113,35 @@ def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray
     new_index = np.cumsum(used) - 1
     mesh = TriMesh(vertices[used], new_index[faces])
     return mesh, kept[used], RepairReport(**counts)
+
+
+def repair_point_cloud(points, **cloud_options) -> tuple[PointCloud, np.ndarray, PointCloudRepairReport]:
+    """Drop the points of a cloud that have no right place in it, in this order: points with a NaN or infinite
+    coordinate, points that repeat an earlier point exactly (the first is kept), and the stray points that
+    :func:`hamsa.pointcloud.stray_points` finds among the rest.
+
+    Parameters
+    ----------
+    points : (n, 3) array
+    **cloud_options : the keywords of :class:`~hamsa.pointcloud.PointCloud` (``neighbors``, ...)
+
+    Returns
+    -------
+    (cloud, kept, report): the :class:`~hamsa.pointcloud.PointCloud` of the points left, ``kept`` (n',) the
+    input index of each of its points (ascending), and a :class:`PointCloudRepairReport`. Raises MeshError when
+    the points are not an (n, 3) real array, or when what is left is not a valid cloud (too few points, huge
+    coordinates).
+    """
+    points = as_coordinates(points, "points")
+    kept = np.flatnonzero(np.isfinite(points).all(axis=1))
+    counts = {"non_finite_points": len(points) - len(kept)}
+    _, first = np.unique(points[kept], axis=0, return_index=True)
+    counts["repeated_points"] = len(kept) - len(first)
+    kept = kept[np.sort(first)]
+    stray = stray_points(points[kept])
+    counts["stray_points"] = len(stray)
+    kept = np.delete(kept, stray)
+    return PointCloud(points[kept], **cloud_options), kept, PointCloudRepairReport(**counts)
 
 
 def orient_faces(mesh) -> TriMesh:
