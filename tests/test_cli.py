@@ -163,3 +163,20 @@ def test_basis_shows_its_steps_and_the_converged_pairs_on_a_terminal(tmp_path, c
     assert "solving for 30 eigenpairs of n = 5000" in err and "30/30 eigenpairs converged" in err
     assert main(["basis", str(path), "-k", "30", "-q", "-o", str(out)]) == 0
     assert "eigenpairs converged" not in capsys.readouterr().err
+
+
+def test_modes_and_optimize_take_a_point_file(tmp_path):
+    pytest.importorskip("robust_laplacian", reason="point clouds need the [pointcloud] extra")
+    from hamsa.cmm import compressed_modes
+
+    points = tmp_path / "capsule.npy"
+    np.save(points, shapes.capsule().vertices)
+    out = tmp_path / "modes.npz"
+    assert main(["modes", str(points), "-k", "2", "--mu", "30", "--neighbors", "20", "-o", str(out), "-q"]) == 0
+    expected = compressed_modes(hamsa.PointCloud(np.load(points), neighbors=20), k=2, mu=30.0).modes
+    with np.load(out) as saved:
+        np.testing.assert_allclose(saved["modes"], expected, atol=1e-10)
+    potential = tmp_path / "potential.npy"
+    assert main(["optimize", str(points), "-k", "5", "-m", "30", "--iterations", "5", "-o", str(potential)]) == 0
+    assert np.load(potential).shape == (len(np.load(points)),)
+    assert main(["compress", str(points), "-k", "5", "-o", str(tmp_path / "c.hmz")]) == 2

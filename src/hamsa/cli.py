@@ -251,7 +251,7 @@ def _parser() -> argparse.ArgumentParser:
     optimize = commands.add_parser(
         "optimize", help="optimize the potential whose k eigenvectors best represent data (paper 3)"
     )
-    optimize.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    optimize.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     optimize.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     optimize.add_argument("-k", type=_positive_int, required=True, help="number of eigenvectors")
     optimize.add_argument("--data", help="(n,) or (n, d) .npy to represent (default: the vertex coordinates)")
@@ -273,6 +273,7 @@ def _parser() -> argparse.ArgumentParser:
         help="remove the data's (area-weighted) mean first: the result no longer depends on where the shape sits",
     )
     optimize.add_argument("-o", "--output", required=True, help="output .npy with the potential")
+    _add_cloud_options(optimize)
 
     compress = commands.add_parser("compress", help="spectral geometry compression (Karni-Gotsman / Hamiltonian)")
     compress.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
@@ -290,13 +291,14 @@ def _parser() -> argparse.ArgumentParser:
     decompress.add_argument("-o", "--output", required=True, help="output mesh file")
 
     modes = commands.add_parser("modes", help="compressed manifold modes by IRLS Hamiltonian eigenproblems (paper 4)")
-    modes.add_argument("mesh", help="mesh file (.off .obj .ply .stl, optionally .gz)")
+    modes.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     modes.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     modes.add_argument("-k", type=_positive_int, required=True, help="number of modes")
     modes.add_argument("--mu", type=float, required=True, help="L1 weight (for a unit-area mesh, 10-500)")
     modes.add_argument("--method", choices=("hamiltonian", "admm"), default="hamiltonian")
     modes.add_argument("--unit-area", action="store_true", help="scale the mesh to unit area first")
     modes.add_argument("-o", "--output", required=True, help="output .npz (modes, objective, mu)")
+    _add_cloud_options(modes)
 
     match = commands.add_parser("match", help="a dense vertex map from SOURCE to TARGET (descriptors, functional maps)")
     match.add_argument("source", help=f"source mesh file or {POINTS_HELP}")
@@ -682,7 +684,8 @@ def _optimize(args) -> None:
     from hamsa.optimize import optimize_potential
 
     output = _output_path(args, ".npy", args.mesh, args.data)
-    mesh = _load_for_operators(args.mesh, args.repair).mesh
+    mesh = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args)).mesh
+    _check_cloud_options(args, mesh)
     if args.data:
         data = load_array(args.data, ndim=(1, 2), rows=mesh.n_vertices)
     else:
@@ -764,7 +767,8 @@ def _modes(args) -> None:
     from hamsa.files import atomic_write
 
     output = _output_path(args, ".npz", args.mesh)
-    mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair)
+    mesh, vertex_ids, _ = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
+    _check_cloud_options(args, mesh)
     if args.unit_area:
         mesh = mesh.scaled_to_unit_area()
 

@@ -29,8 +29,8 @@ import scipy.sparse as sp
 from hamsa.eigen import eigenbasis
 from hamsa.errors import ConvergenceWarning, HamsaError
 from hamsa.factorization import CholeskySolver
-from hamsa.mesh import as_trimesh
 from hamsa.operators import hamiltonian
+from hamsa.pointcloud import as_shape
 
 
 class WoodburyInverse:
@@ -110,7 +110,7 @@ def compressed_modes(
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
+    mesh : TriMesh, (vertices, faces) or PointCloud
     k : number of modes
     mu : L1 weight (scale-dependent: with a unit-area mesh, mu ~ 1-50 gives compact supports)
     method : "hamiltonian" (IRLS + Woodbury, this paper) or "admm" (the baseline of Neumann et al. 2014,
@@ -141,7 +141,7 @@ def compressed_modes(
         raise HamsaError(f"method must be 'hamiltonian' or 'admm', got {method!r}")
     if l1 not in ("area", "vector"):
         raise HamsaError(f"l1 must be 'area' or 'vector', got {l1!r}")
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     n = mesh.n_vertices
     if not 1 <= k < n:
         raise HamsaError(f"k = {k} must be between 1 and n - 1 = {n - 1}")

@@ -313,6 +313,8 @@ def as_trimesh(mesh_like) -> TriMesh:
         if cells.size % 4 or not np.all(cells.reshape(-1, 4)[:, 0] == 3):
             raise MeshError("the PolyData has non-triangle faces: call .triangulate() first")
         return TriMesh(np.asarray(mesh_like.points), cells.reshape(-1, 4)[:, 1:])
+    if kind == "hamsa.PointCloud":
+        raise MeshError("this needs a triangle mesh (its faces), and a point cloud has none")
     raise MeshError(
         f"expected a TriMesh, a (vertices, faces) pair, a trimesh.Trimesh or a pyvista.PolyData, got {kind}"
     )

@@ -4,7 +4,8 @@ A vertex function is read as its piecewise-linear (P1) interpolant. Its nodal do
 components of {f > 0} and {f < 0}) are then exactly the connected components of the graph of mesh
 edges joining two vertices of the same strict sign: inside a triangle, two vertices of one sign share
 an edge, and the zero crossing on an edge with endpoints of opposite signs separates them. Vertices
-with |f| <= zero_tol * max|f| lie on the nodal set and belong to no domain (label -1).
+with |f| <= zero_tol * max|f| lie on the nodal set and belong to no domain (label -1). On a point cloud the
+graph is that of its operator (:attr:`hamsa.pointcloud.PointCloud.edges`, the local triangulations' edges).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from scipy.sparse.csgraph import connected_components
 
 from hamsa.eigen import Eigenbasis
 from hamsa.errors import HamsaError
-from hamsa.mesh import as_trimesh
+from hamsa.pointcloud import as_shape
 
 
 def nodal_domains(mesh, f, zero_tol: float = 1e-9) -> tuple[int, np.ndarray]:
@@ -23,7 +24,7 @@ def nodal_domains(mesh, f, zero_tol: float = 1e-9) -> tuple[int, np.ndarray]:
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces)
+    mesh : TriMesh, (vertices, faces) or PointCloud (its graph: :attr:`~hamsa.pointcloud.PointCloud.edges`)
     f : (n,) array
     zero_tol : float
         Values with |f| <= zero_tol * max|f| count as zero (on the nodal set).
@@ -34,7 +35,7 @@ def nodal_domains(mesh, f, zero_tol: float = 1e-9) -> tuple[int, np.ndarray]:
     labels : (n,) int64, domain index 0..count-1 per vertex, -1 on the nodal set; domains are numbered
         in order of their smallest vertex index.
     """
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     f = np.asarray(f, dtype=np.float64)
     if f.shape != (mesh.n_vertices,):
         raise HamsaError(f"function has shape {f.shape}, the mesh has {mesh.n_vertices} vertices")
@@ -100,7 +101,7 @@ def segment(mesh, basis: Eigenbasis, index: int, min_vertices: int = 1) -> np.nd
     Nodal-set vertices and domains smaller than ``min_vertices`` join the neighbouring domain they
     share most edges with, so every vertex gets a segment.
     """
-    mesh = as_trimesh(mesh)
+    mesh = as_shape(mesh)
     if not 0 <= index < basis.k:
         raise HamsaError(f"eigenfunction index {index} is outside the basis (k = {basis.k})")
     _, labels = nodal_domains(mesh, basis.vectors[:, index])

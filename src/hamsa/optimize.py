@@ -49,7 +49,6 @@ import scipy.sparse as sp
 
 from hamsa.eigen import Eigenbasis, HamiltonianEigensolver, generalized_eigsh
 from hamsa.errors import HamsaError
-from hamsa.mesh import as_trimesh
 from hamsa.operators import hamiltonian
 
 PARAMETRIZATIONS = ("signed", "square")
@@ -193,7 +192,7 @@ def _operators(mesh, operators, mass_weighted: bool):
     if (mesh is None) == (operators is None):
         raise HamsaError("give a mesh (a TriMesh or (vertices, faces)) or operators=(W, A), not both or neither")
     if mesh is not None:
-        W, A = hamiltonian(as_trimesh(mesh))
+        W, A = hamiltonian(mesh)
     else:
         try:
             W, A = operators
@@ -269,7 +268,7 @@ def optimize_potential(
 
     Parameters
     ----------
-    mesh : TriMesh or (vertices, faces); None with ``operators``
+    mesh : TriMesh, (vertices, faces) or PointCloud; None with ``operators``
     X : (n,) or (n, d) data; for a mesh, typically its vertex coordinates
     k : number of eigenvectors representing X
     operators : a (W, A) pair of sparse matrices instead of a mesh (e.g. from

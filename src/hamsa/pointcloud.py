@@ -7,7 +7,8 @@ there; the union of these local triangulations is a non-manifold triangle set wh
 Delaunay cotan Laplacian (each triangle weighted 1/3) is ``W`` and whose lumped mass is ``A``. ``W`` is
 symmetric positive semidefinite with ``W @ 1 = 0`` (hamsa's sign convention) and ``A.sum()`` estimates the
 sampled surface's area, so everything in hamsa that needs only (W, A) -- eigenbases of ``W + A diag(V)``,
-heat kernels, HKS / WKS, functional maps, ICSKM -- runs on a cloud unchanged. Geodesic distances on a cloud
+heat kernels, HKS / WKS, functional maps, ICSKM, potential optimization, compressed manifold modes, nodal
+domains over :attr:`PointCloud.edges` -- runs on a cloud unchanged. Geodesic distances on a cloud
 come from potpourri3d's point-cloud heat method (:class:`hamsa.geodesic.PointCloudGeodesicSolver`). Needs
 the ``[pointcloud]`` extra.
 
@@ -313,6 +314,15 @@ class PointCloud:
     @cached_property
     def bounding_box_diagonal(self) -> float:
         return float(np.linalg.norm(self._points.max(axis=0) - self._points.min(axis=0)))
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(e, 2) unique pairs (i < j, sorted) that the stiffness W joins: the edges of the local triangulations
+        (of robust_laplacian's, with ``separate_sheets=False``), the cloud's graph for nodal domains (read-only)."""
+        upper = sp.triu(self.operators[0], k=1).tocoo()
+        edges = np.unique(np.stack([upper.row, upper.col], axis=1).astype(np.int64), axis=0)
+        edges.flags.writeable = False
+        return edges
 
     @cached_property
     def stray_points(self) -> np.ndarray:
