@@ -17,9 +17,8 @@ import numpy as np
 from hamsa.eigen import Eigenbasis, eigenbasis
 from hamsa.errors import HamsaError, PotentialError
 from hamsa.geodesic import geodesic_distance
-from hamsa.mesh import as_trimesh
-from hamsa.operators import stiffness_matrix, vertex_areas
-from hamsa.pointcloud import as_shape
+from hamsa.operators import laplacian_operators, vertex_areas
+from hamsa.pointcloud import PointCloud, as_shape
 
 
 def step(mesh, region, height: float, threshold: float | None = None) -> np.ndarray:
@@ -85,11 +84,12 @@ def eigenfunction_sum(basis: Eigenbasis, indices=(1, 2, 3, 4), signs=None) -> np
 def area_distortion(mesh_a, mesh_b, correspondence=None) -> np.ndarray:
     """Local area distortion of a map between two shapes (paper eq. stablePotential), on mesh_a's vertices.
 
-    ``V(i) = max(a_A(i) / a_B(c(i)), a_B(c(i)) / a_A(i)) >= 1`` with a the mixed-Voronoi vertex areas
-    after scaling both meshes to unit total area, and c the correspondence (vertex i of A -> vertex
-    c[i] of B; default the identity, for meshes that share vertex indexing).
+    ``V(i) = max(a_A(i) / a_B(c(i)), a_B(c(i)) / a_A(i)) >= 1`` with a the lumped vertex areas (the mass of
+    each shape's operator: mixed-Voronoi on a mesh, the point-cloud Laplacian's on a cloud) after scaling both
+    shapes to unit total area, and c the correspondence (vertex i of A -> vertex c[i] of B; default the
+    identity, for shapes that share vertex indexing). Either shape may be a mesh or a point cloud.
     """
-    a, b = as_trimesh(mesh_a), as_trimesh(mesh_b)
+    a, b = as_shape(mesh_a), as_shape(mesh_b)
     if correspondence is None and a.n_vertices != b.n_vertices:
         raise PotentialError(
             f"the meshes have {a.n_vertices} and {b.n_vertices} vertices: pass a correspondence (the identity "
@@ -100,9 +100,8 @@ def area_distortion(mesh_a, mesh_b, correspondence=None) -> np.ndarray:
         raise PotentialError(f"correspondence must be (n_a,) = ({a.n_vertices},) integer indices into mesh_b")
     if c.min() < 0 or c.max() >= b.n_vertices:
         raise PotentialError(f"correspondence indices must be in [0, {b.n_vertices})")
-    area_a = vertex_areas(a) / a.area
-    area_b = vertex_areas(b)[c] / b.area
-    ratio = area_a / area_b
+    area_a, area_b = laplacian_operators(a)[1].diagonal(), laplacian_operators(b)[1].diagonal()
+    ratio = (area_a / area_a.sum()) / (area_b[c] / area_b.sum())
     return np.maximum(ratio, 1.0 / ratio)
 
 
@@ -131,18 +130,19 @@ def dalmatian_texture(mesh, spots: int = 40, radius: float = 0.05, seed: int = 0
     area), each of geodesic radius ``radius x sqrt(area) x u`` with u uniform in [0.6, 1.4], with a soft
     edge (smoothstep over the outer 30% of the radius). Geodesics by the heat method, so the coat follows
     the surface: on meshes that share vertex indexing (a TOSCA class) ``colors[truth]`` carries the same
-    coat to another pose. :func:`from_vertex_colors` turns it into a texture potential.
+    coat to another pose. On a point cloud, its mass and its heat-method geodesics.
+    :func:`from_vertex_colors` turns it into a texture potential.
     """
-    from hamsa.geodesic import GeodesicSolver
+    from hamsa.geodesic import geodesic_solver
 
-    mesh = as_trimesh(mesh)
+    shape = as_shape(mesh)
     if not (isinstance(spots, (int, np.integer)) and spots >= 1) or not radius > 0:
         raise PotentialError(f"need spots >= 1 and radius > 0, got {spots} and {radius}")
     rng = np.random.default_rng(seed)
-    areas = vertex_areas(mesh)
-    centers = rng.choice(mesh.n_vertices, size=min(spots, mesh.n_vertices), replace=False, p=areas / areas.sum())
-    radii = radius * np.sqrt(mesh.area) * rng.uniform(0.6, 1.4, len(centers))
-    closeness = (GeodesicSolver(mesh).distances_from(centers) / radii).min(axis=1)  # < 1 inside a spot
+    areas = laplacian_operators(shape)[1].diagonal()
+    centers = rng.choice(shape.n_vertices, size=min(spots, shape.n_vertices), replace=False, p=areas / areas.sum())
+    radii = radius * np.sqrt(areas.sum()) * rng.uniform(0.6, 1.4, len(centers))
+    closeness = (geodesic_solver(shape).distances_from(centers) / radii).min(axis=1)  # < 1 inside a spot
     edge = np.clip((closeness - 0.7) / 0.3, 0.0, 1.0)
     luminance = edge * edge * (3 - 2 * edge)  # 0 inside, 1 outside
     return np.repeat(luminance[:, None], 3, axis=1)
@@ -152,23 +152,26 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
     """Discrete curvature per vertex (Meyer et al. 2003), in 1/length (mean) or 1/length^2 (gaussian).
 
     ``"mean"``: H = |W X|_i / (2 a_i), signed positive where the surface is convex (the mean-curvature
-    normal W X / a points inward; sign from the area-weighted vertex normal). ``"gaussian"``:
+    normal W X / a points inward; sign from the outward vertex normal). On a point cloud W and a are its
+    operator's and the sign comes from its estimated outward normals. ``"gaussian"`` (meshes only):
     K = (2 pi - sum of angles) / a_i at interior vertices, (pi - sum) / a_i on the boundary (there it
     also counts the boundary's turning angle, e.g. (pi/2) / a_i at a rectangle's corner).
     ``"absolute_mean"``: |H|.
     """
-    mesh = as_trimesh(mesh)
-    mesh.require_operator_ready()
-    areas = vertex_areas(mesh)
+    shape = as_shape(mesh)
     if kind in ("mean", "absolute_mean"):
-        laplacian = (
-            stiffness_matrix(mesh) @ mesh.vertices
-        )  # = -(cotan Laplacian) X = 2 a H n (inward-pointing for convex)
-        value = np.linalg.norm(laplacian, axis=1) / (2 * areas)
+        W, A = laplacian_operators(shape)
+        laplacian = W @ shape.vertices  # = -(Laplacian) X = 2 a H n (inward-pointing for convex)
+        value = np.linalg.norm(laplacian, axis=1) / (2 * A.diagonal())
         if kind == "absolute_mean":
             return value
-        return value * np.sign(np.einsum("ij,ij->i", laplacian, mesh.vertex_normals) + 0.0)
+        normals = shape.normals if isinstance(shape, PointCloud) else shape.vertex_normals
+        return value * np.sign(np.einsum("ij,ij->i", laplacian, normals) + 0.0)
     if kind == "gaussian":
+        if isinstance(shape, PointCloud):
+            raise HamsaError("gaussian curvature needs a mesh's angles; a point cloud has the mean curvature only")
+        mesh = shape
+        areas = vertex_areas(mesh)
         v, f = mesh.vertices, mesh.faces
         angles = np.zeros(mesh.n_vertices)
         for c in range(3):
