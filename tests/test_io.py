@@ -119,3 +119,72 @@ def test_reads_the_gzipped_datasets_in_file_order():
     assert len(gorilla.unreferenced_vertices) == 1328
     hand = hamsa.load_mesh(DATA / "classic" / "hand_6k.off")
     assert (hand.n_vertices, hand.n_faces) == (6338, 12672)
+
+
+def _coloured_files(folder, mesh, colours):
+    """The mesh with 8-bit vertex colours as a binary PLY cloud (float32, uchar), an ASCII PLY mesh, a COFF
+    mesh (0-255 with alpha) and an OBJ mesh ('v x y z r g b' in [0, 1], gzipped)."""
+    n, faces = mesh.n_vertices, mesh.faces
+    rgb = np.round(colours * 255).astype(np.uint8)
+    files = {}
+    header = "ply\nformat {}\nelement vertex {}\n" + "".join(
+        f"property {t} {c}\n" for t, c in (("float", "x"), ("float", "y"), ("float", "z"))
+    )
+    colour_props = "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+    table = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    table["x"], table["y"], table["z"] = mesh.vertices.T
+    table["r"], table["g"], table["b"] = rgb.T
+    files["cloud.ply"] = (header.format("binary_little_endian 1.0", n) + colour_props + "end_header\n").encode()
+    files["cloud.ply"] += table.tobytes()
+    rows = [f"{x!r} {y!r} {z!r} {r} {g} {b}" for (x, y, z), (r, g, b) in zip(mesh.vertices.tolist(), rgb.tolist())]
+    triangles = [f"3 {a} {b} {c}" for a, b, c in faces.tolist()]
+    files["mesh.ply"] = "\n".join(
+        [header.format("ascii 1.0", n).replace("float", "double") + colour_props
+         + f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header", *rows, *triangles]
+    )  # fmt: skip
+    files["mesh.off"] = "\n".join([f"COFF\n{n} {len(faces)} 0", *[row + " 255" for row in rows], *triangles])
+    obj = [f"v {x!r} {y!r} {z!r} {r / 255} {g / 255} {b / 255}" for (x, y, z), (r, g, b) in
+           zip(mesh.vertices.tolist(), rgb.tolist())]  # fmt: skip
+    files["mesh.obj.gz"] = gzip.compress(
+        ("\n".join(obj + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces.tolist()])).encode()
+    )
+    paths = []
+    for name, content in files.items():
+        path = folder / name
+        path.write_bytes(content if isinstance(content, bytes) else content.encode())
+        paths.append(path)
+    return paths, rgb / 255.0
+
+
+def test_vertex_colours_are_read_from_ply_coff_and_obj_and_make_the_texture_potential(tmp_path, mesh):
+    from hamsa.cli import main
+    from hamsa.io import read_vertex_colors
+    from hamsa.potentials import from_spec, from_vertex_colors
+
+    colours = np.random.default_rng(4).random((mesh.n_vertices, 3))
+    paths, expected = _coloured_files(tmp_path, mesh, colours)
+    for path in paths:
+        np.testing.assert_array_equal(read_vertex_colors(path), expected, err_msg=path.name)
+        shape = hamsa.load_shape(path) if path.name != "cloud.ply" else hamsa.load_point_cloud(path)
+        np.testing.assert_allclose(shape.vertices, mesh.vertices, atol=1e-6 if path.name == "cloud.ply" else 0)
+    luminance = expected @ [0.2126, 0.7152, 0.0722]
+    np.testing.assert_allclose(from_spec(mesh, f"50*texture:{paths[2]}"), 50 * luminance)
+    np.testing.assert_allclose(from_vertex_colors(mesh, read_vertex_colors(paths[0])), luminance)
+    # a repaired copy takes the colours of the vertices it kept
+    kept = np.arange(0, mesh.n_vertices, 2)
+    cloud = hamsa.PointCloud(mesh.vertices[kept])
+    np.testing.assert_allclose(from_spec(cloud, f"texture:{paths[1]}", vertex_ids=kept), luminance[kept])
+    out = tmp_path / "basis.npz"
+    assert main(["basis", str(paths[1]), "-k", "4", "--potential", f"20*texture:{paths[1]}", "-o", str(out)]) == 0
+    np.testing.assert_allclose(hamsa.Eigenbasis.load(out).potential, 20 * luminance)
+
+    plain = tmp_path / "plain.off"
+    hamsa.save_mesh(mesh, plain)
+    with pytest.raises(MeshError, match="plain.off.*no vertex colours"):
+        read_vertex_colors(plain)
+    with pytest.raises(hamsa.errors.PotentialError, match="has 162 vertex colours, the shape 100 vertices"):
+        from_spec(hamsa.PointCloud(mesh.vertices[:100]), f"texture:{paths[1]}")
+    bright = tmp_path / "bright.obj"
+    bright.write_text("v 0 0 0 300 0 0\nv 1 0 0 0 0 0\nv 0 1 0 0 0 0\nf 1 2 3\n")
+    with pytest.raises(MeshError, match="outside"):
+        read_vertex_colors(bright)

@@ -58,7 +58,8 @@ REPAIR_HELP = (
 POTENTIAL_HELP = (
     "potential V: a specification [SCALE*]KIND:ARGS -- geodesic:I[,J..] (distance from vertices, in [0, 1]), "
     "step:AXIS>VALUE or step:AXIS<VALUE (1 there, 0 elsewhere; coordinates as in the file), eigsum:I-J (sum of "
-    "LBO eigenfunctions I..J, 0-based: eigsum:1-4 is the paper's matching potential), curvature:mean|gaussian -- "
+    "LBO eigenfunctions I..J, 0-based: eigsum:1-4 is the paper's matching potential), curvature:mean|gaussian, "
+    "texture:FILE (luminance of FILE's vertex colours in [0, 1]: PLY red/green/blue, COFF, OBJ v x y z r g b) -- "
     "e.g. 100*geodesic:12,40; or a .npy / text file with one value per vertex (of the input, also with --repair)"
 )
 

@@ -190,6 +190,63 @@ def load_mesh(path: str | os.PathLike, repair: bool = False, *, manifold: bool =
     return mesh
 
 
+_PLY_COLOURS = (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
+
+
+def read_vertex_colors(path: str | os.PathLike) -> np.ndarray:
+    """The per-vertex colours of a mesh or point file, (n, 3) float64 RGB in [0, 1], one row per vertex in file
+    order (for :func:`hamsa.potentials.from_vertex_colors`, the texture potential).
+
+    Read from a PLY vertex element's ``red green blue`` (or ``r g b``, ``diffuse_red ...``) properties, an OFF
+    file's ``COFF`` / ``CNOFF`` vertex lines, or OBJ ``v x y z r g b`` lines; ``.gz`` too. Integer colours are
+    divided by their type's largest value (255 for ``uchar``; an OFF or OBJ file's by 255 when any exceeds 1).
+    Raises MeshError naming the file if it cannot be read or has no vertex colours.
+    """
+    fmt, gzipped = _suffix(path)
+    if fmt not in ("ply", "off", "obj"):
+        raise MeshError(f"'{path}': vertex colours are read from .ply, .off (COFF) or .obj files (optionally .gz)")
+    try:
+        data = read_bytes(path, decompress="gzip" if gzipped else None)
+        colours = {"ply": _ply_colours, "off": _off_colours, "obj": _obj_colours}[fmt](data)
+    except FileAccessError as exc:
+        raise MeshError(str(exc)) from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise _naming(path, MeshError(str(exc))) from None
+    if not np.all(np.isfinite(colours)) or colours.min() < 0 or colours.max() > 1:
+        raise MeshError(f"'{path}': vertex colours outside [0, 1] (or [0, 255] as integers)")
+    return colours
+
+
+def _ply_colours(data: bytes) -> np.ndarray:
+    table, _ = _read_ply_tables(data)
+    names = next((names for names in _PLY_COLOURS if all(name in table for name in names)), None)
+    if names is None:
+        raise MeshError("the PLY vertex element has no red, green and blue properties")
+    columns = [table[name] for name in names]
+    scale = [np.iinfo(c.dtype).max if np.issubdtype(c.dtype, np.integer) else 1.0 for c in columns]
+    return np.stack([c.astype(np.float64) / k for c, k in zip(columns, scale)], axis=1)
+
+
+def _off_colours(data: bytes) -> np.ndarray:
+    variant, vertex_lines, _ = _off_parts(data)
+    if not variant.startswith("C"):
+        raise MeshError(f"an {variant} file has no vertex colours (COFF and CNOFF have)")
+    first = 6 if variant == "CNOFF" else 3  # x y z [nx ny nz] r g b [a]
+    return _byte_or_unit(_fixed_width(vertex_lines, first + 3, "vertex")[:, first:])
+
+
+def _obj_colours(data: bytes) -> np.ndarray:
+    vertex_lines, _ = _obj_lines(data)
+    if min(len(line.split()) for line in vertex_lines) < 6:
+        raise MeshError("the OBJ vertex lines have no colours ('v x y z r g b')")
+    return _byte_or_unit(_fixed_width(vertex_lines, 6, "vertex")[:, 3:])
+
+
+def _byte_or_unit(colours: np.ndarray) -> np.ndarray:
+    """Text colours as [0, 1]: divided by 255 when any exceeds 1 (0-255 integers), else as written."""
+    return colours / 255.0 if colours.max(initial=0.0) > 1 else colours
+
+
 def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """The raw ``(vertices (n, 3) float64, faces (m, 3) int64)`` of a mesh file, before any validation.
 
@@ -260,6 +317,12 @@ def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
 
 
 def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    _, vertex_lines, face_lines = _off_parts(data)
+    return _fixed_width(vertex_lines, 3, "vertex"), _off_faces(face_lines)
+
+
+def _off_parts(data: bytes) -> tuple[str, list[str], list[str]]:
+    """(variant: OFF / COFF / NOFF / CNOFF, vertex lines, face lines) of an OFF file."""
     lines = _data_lines(data.decode("utf-8"))
     if not lines:
         raise MeshError("no OFF header")
@@ -282,10 +345,7 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         raise MeshError(f"OFF header has negative counts ({n}, {m})")
     if len(body) < n + m:
         raise MeshError(f"OFF header promises {n} vertices and {m} faces, the file has only {len(body)} data lines")
-    vertices = _fixed_width(body[:n], 3, "vertex")
-    face_lines = body[n : n + m]
-    faces = _off_faces(face_lines)
-    return vertices, faces
+    return header[0], body[:n], body[n : n + m]
 
 
 def _off_faces(face_lines: list[str]) -> np.ndarray:
@@ -304,15 +364,7 @@ def _off_faces(face_lines: list[str]) -> np.ndarray:
 
 
 def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    vertex_lines, face_lines = [], []
-    for raw in data.decode("utf-8").splitlines():
-        line = raw.split("#", 1)[0].strip()
-        if line.startswith("v "):
-            vertex_lines.append(line[2:])
-        elif line.startswith("f "):
-            face_lines.append(line[2:].split())
-    if not vertex_lines:
-        raise MeshError("no vertices ('v x y z' lines)")
+    vertex_lines, face_lines = _obj_lines(data)
     vertices = _fixed_width(vertex_lines, 3, "vertex")
     n = len(vertices)
     lengths = {len(f) for f in face_lines}
@@ -329,6 +381,20 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if np.any(np.asarray(flat) == 0):
         raise MeshError("OBJ face index 0 is invalid (indices are 1-based)")
     return vertices, faces
+
+
+def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]]]:
+    """(the text after 'v ' of each vertex line, the tokens after 'f ' of each face line) of an OBJ file."""
+    vertex_lines, face_lines = [], []
+    for raw in data.decode("utf-8").splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if line.startswith("v "):
+            vertex_lines.append(line[2:])
+        elif line.startswith("f "):
+            face_lines.append(line[2:].split())
+    if not vertex_lines:
+        raise MeshError("no vertices ('v x y z' lines)")
+    return vertex_lines, face_lines
 
 
 # ------------------------------------------------------------------------------------- PLY
@@ -353,6 +419,14 @@ _PLY_TYPES = {
 
 
 def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    table, faces = _read_ply_tables(data)
+    _require_properties(table, "xyz")
+    vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+    return vertices, np.zeros((0, 3), dtype=np.int64) if faces is None else faces  # a point cloud: no faces
+
+
+def _read_ply_tables(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """({property name: (n,) column} of the vertex element, (m, 3) faces or None) of a PLY file."""
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
         raise MeshError("missing 'ply' magic or 'end_header'")
@@ -380,10 +454,8 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if "vertex" not in [e["name"] for e in elements]:
         raise MeshError("PLY needs a 'vertex' element")
     if fmt == "ascii":
-        vertices, faces = _read_ply_ascii(data[body_start:].decode("ascii"), elements)
-    else:
-        vertices, faces = _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
-    return vertices, np.zeros((0, 3), dtype=np.int64) if faces is None else faces  # a point cloud: no faces
+        return _read_ply_ascii(data[body_start:].decode("ascii"), elements)
+    return _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
 
 
 def _ply_type(name: str) -> str:
@@ -392,14 +464,10 @@ def _ply_type(name: str) -> str:
     return _PLY_TYPES[name]
 
 
-def _xyz_columns(element: dict) -> list[int]:
-    names = [p[0] for p in element["props"]]
-    missing = [c for c in "xyz" if c not in names]
+def _require_properties(table: dict, names) -> None:
+    missing = [c for c in names if c not in table]
     if missing:
         raise MeshError(f"PLY vertex element lacks properties {missing}")
-    if any(p[1] == "list" for p in element["props"]):
-        raise MeshError("PLY vertex element with list properties is not supported")
-    return [names.index(c) for c in "xyz"]
 
 
 def _face_list_index(element: dict) -> int:
@@ -409,7 +477,7 @@ def _face_list_index(element: dict) -> int:
     raise MeshError("PLY face element lacks a 'vertex_indices' list")
 
 
-def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     lines = [line for line in text.splitlines() if line.strip()]
     pos = 0
     vertices = faces = None
@@ -419,9 +487,14 @@ def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[np.ndarray, np.nda
             raise MeshError(f"PLY promises {element['count']} '{element['name']}' rows, found {len(rows)}")
         pos += element["count"]
         if element["name"] == "vertex":
-            columns = _xyz_columns(element)
+            if any(p[1] == "list" for p in element["props"]):
+                raise MeshError("PLY vertex element with list properties is not supported")
             table = _fixed_width(rows, len(element["props"]), "vertex")
-            vertices = table[:, columns]
+            # integer properties (colours) keep their declared type; coordinates keep every digit of the text
+            vertices = {
+                p[0]: table[:, i] if p[1].startswith("f") else table[:, i].astype(p[1])
+                for i, p in enumerate(element["props"])
+            }
         elif element["name"] == "face":
             if _face_list_index(element) != 0:
                 raise MeshError("ASCII PLY faces must start with the vertex index list")
@@ -429,7 +502,7 @@ def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[np.ndarray, np.nda
     return vertices, faces
 
 
-def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[np.ndarray, np.ndarray]:
+def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     pos = 0
     vertices = faces = None
     for element in elements:
@@ -456,8 +529,7 @@ def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[np.
             dtype = np.dtype([(p[0], order + p[1]) for p in element["props"]])
             table = _frombuffer(body, dtype, count, pos, element["name"])
             if element["name"] == "vertex":
-                _xyz_columns(element)
-                vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+                vertices = {p[0]: table[p[0]] for p in element["props"]}
         pos += dtype.itemsize * count
     return vertices, faces
 

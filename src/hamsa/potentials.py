@@ -186,7 +186,7 @@ def curvature(mesh, kind: str = "mean") -> np.ndarray:
     raise HamsaError(f"curvature kind must be 'mean', 'absolute_mean' or 'gaussian', got {kind!r}")
 
 
-SPEC_KINDS = ("geodesic", "step", "eigsum", "curvature")
+SPEC_KINDS = ("geodesic", "step", "eigsum", "curvature", "texture")
 _SPEC = re.compile(r"^(?:(?P<scale>[^*:]+)\*)?(?P<kind>[a-z]+):(?P<arguments>.*)$")
 
 
@@ -206,10 +206,12 @@ def from_spec(shape, spec: str, vertex_ids=None) -> np.ndarray:
     - ``eigsum:I-J`` or ``eigsum:I,J,...``: :func:`eigenfunction_sum` of the shape's LBO eigenfunctions
       with those 0-based indices (``eigsum:1-4`` is the paper's phi_2..phi_5), in [0, 2];
     - ``curvature:mean|absolute_mean|gaussian``: :func:`curvature`;
+    - ``texture:FILE``: :func:`from_vertex_colors` of the vertex colours of FILE
+      (:func:`hamsa.io.read_vertex_colors`; e.g. the coloured scan the shape was read from), in [0, 1];
 
     times SCALE (default 1), e.g. ``100*geodesic:12,40``. ``vertex_ids`` (n,): when ``shape`` is a
     repaired copy of an input, the input vertex of each of its vertices (``Eigenbasis.vertex_ids``); the
-    ids in a ``geodesic`` spec are then the input's.
+    ids in a ``geodesic`` spec and the rows of a ``texture`` file are then the input's.
 
     Raises
     ------
@@ -239,11 +241,28 @@ def from_spec(shape, spec: str, vertex_ids=None) -> np.ndarray:
         if not indices or min(indices) < 0:
             raise PotentialError(f"potential {spec!r}: eigsum needs 0-based indices, e.g. eigsum:1-4")
         values = eigenfunction_sum(eigenbasis(shape, max(indices) + 1), indices)
+    elif kind == "texture":
+        values = from_vertex_colors(shape, _spec_colours(arguments, shape.n_vertices, vertex_ids, spec))
     else:
         if arguments not in ("mean", "absolute_mean", "gaussian"):
             raise PotentialError(f"potential {spec!r}: curvature is mean, absolute_mean or gaussian")
         values = curvature(shape, arguments)
     return scale * values
+
+
+def _spec_colours(path: str, n: int, vertex_ids, spec: str) -> np.ndarray:
+    """The vertex colours of ``path``, one row per vertex of the shape (picked through ``vertex_ids`` when the
+    file is the input of a repaired shape)."""
+    from hamsa.io import read_vertex_colors
+
+    if not path:
+        raise PotentialError(f"potential {spec!r}: name the file with the vertex colours, e.g. texture:scan.ply")
+    colours = read_vertex_colors(path)
+    if vertex_ids is not None and len(colours) != n and len(colours) > np.max(vertex_ids):
+        colours = colours[np.asarray(vertex_ids)]  # the repaired shape's input: its kept vertices' colours
+    if len(colours) != n:
+        raise PotentialError(f"potential {spec!r}: '{path}' has {len(colours)} vertex colours, the shape {n} vertices")
+    return colours
 
 
 def _spec_scale(text: str | None, spec: str) -> float:
