@@ -25,6 +25,7 @@ within 0.05) of the same method on the mesh (the LBO's own gaps to the mesh are 
     python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
     python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
     python benchmarks/point_clouds.py --build 50000 200000         # the operators' cost against robust_laplacian
+    python benchmarks/point_clouds.py --strays                     # stray points: false alarms and detection
     python benchmarks/point_clouds.py --table scape.json tosca.json  # the table and the bar of saved rows
 """
 
@@ -116,6 +117,57 @@ def spectrum_errors(dataset, name: str, variants: dict, k: int = 10) -> dict:
         errors = np.abs(hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, **options), k + 1).values[1:] / on_mesh - 1)
         row[label] = (float(errors.mean()), float(errors.max()))
     return row
+
+
+def stray_alarms(dataset, seed: int = 0) -> dict:
+    """Stray points (:func:`hamsa.pointcloud.stray_points`) among every shape's raw vertices (unreferenced ones
+    included) and a seeded random half of them: shapes, points, stray points found, how many of those are
+    vertices that no face uses, and how many shapes have any that are not."""
+    from hamsa.pointcloud import stray_points
+
+    rng = np.random.default_rng(seed)
+    totals = {"shapes": 0, "points": 0, "stray": 0, "unreferenced": 0, "shapes with others": 0}
+    for name in dataset.shapes:
+        mesh = dataset.load(name, drop_unreferenced=False)[0]
+        unreferenced = mesh.unreferenced_vertices
+        for subset in (np.arange(mesh.n_vertices), np.flatnonzero(rng.random(mesh.n_vertices) < 0.5)):
+            stray = subset[stray_points(mesh.vertices[subset])]
+            loose = int(np.isin(stray, unreferenced).sum())
+            totals["shapes"] += 1
+            totals["points"] += len(subset)
+            totals["stray"] += len(stray)
+            totals["unreferenced"] += loose
+            totals["shapes with others"] += int(loose < len(stray))
+    return totals
+
+
+def stray_detection(points: np.ndarray, bands, count: int = 40, seed: int = 0) -> list[tuple[int, int]]:
+    """For each (low, high) band of distances in median point spacings: ``count`` outliers added at seeded random
+    places at that distance from the points (a random vertex moved in a random direction, kept when its
+    distance to the cloud falls in the band; all of a band at once, at least ``high`` spacings apart), and
+    (added, found by :func:`hamsa.pointcloud.stray_points`)."""
+    from hamsa.pointcloud import stray_points
+
+    rng = np.random.default_rng(seed)
+    tree = cKDTree(points)
+    spacing = float(np.median(tree.query(points, 2)[0][:, 1]))
+    rows = []
+    for low, high in bands:
+        chosen: list[np.ndarray] = []
+        for _ in range(200 * count):
+            direction = rng.standard_normal(3)
+            candidate = points[rng.integers(len(points))] + rng.uniform(
+                low, high
+            ) * spacing * direction / np.linalg.norm(direction)
+            if low * spacing <= tree.query(candidate)[0] < high * spacing and all(
+                np.linalg.norm(candidate - c) >= high * spacing for c in chosen
+            ):
+                chosen.append(candidate)
+            if len(chosen) == count:
+                break
+        found = stray_points(np.vstack([points, *chosen])) if chosen else np.zeros(0)
+        rows.append((len(chosen), int(np.sum(found >= len(points)))))
+    return rows
 
 
 def sign_errors(dataset, source_name: str, target_name: str, k: int = 100) -> dict:
@@ -274,6 +326,12 @@ def main(argv=None) -> int:
         "david0's vertices when the data is there), hamsa's stages against robust_laplacian's point-cloud Laplacian",
     )
     parser.add_argument(
+        "--strays",
+        action="store_true",
+        help="instead of matching: stray points among every SCAPE and TOSCA vertex set and a random half of each "
+        "(false alarms), and the outliers found at each distance from the built-in humanoid and SCAPE mesh000",
+    )
+    parser.add_argument(
         "--table",
         nargs="+",
         metavar="JSON",
@@ -307,6 +365,28 @@ def main(argv=None) -> int:
         print(f"needs the shared datasets at {DATA}")
         return 1
     scape, tosca = load_scape(DATA / "scape"), load_tosca(DATA / "tosca_hires")
+    if args.strays:
+        print(
+            f"hamsa {hamsa.__version__}: stray points among the raw vertices (unreferenced included) and a random half"
+        )
+        print("| dataset | clouds | points | stray found | of them unreferenced vertices | clouds with other stray |")
+        print("|---|---|---|---|---|---|")
+        for dataset in (scape, tosca):
+            t = stray_alarms(dataset)
+            print(f"| {dataset.name} | {t['shapes']} | {t['points']} | {t['stray']} | {t['unreferenced']} | "
+                  f"{t['shapes with others']} |", flush=True)  # fmt: skip
+        bands = ((3, 5), (5, 10), (10, 15), (15, 20), (20, 40))
+        print("\noutliers added at a distance from the cloud (median spacings), 40 per band, and found")
+        print(f"| cloud | {' | '.join(f'{low}-{high}' for low, high in bands)} |")
+        print(f"|---|{'---|' * len(bands)}")
+        clouds = {
+            "humanoid (built-in)": hamsa.shapes.humanoid().vertices,
+            "SCAPE mesh000": scape.load("mesh000")[0].vertices,
+        }
+        for label, points in clouds.items():
+            cells = " | ".join(f"{found} / {added}" for added, found in stray_detection(points, bands))
+            print(f"| {label} | {cells} |", flush=True)
+        return 0
     if args.spectra:
         off_sheet = args.off_sheet or 0.7
         variants = {

@@ -176,3 +176,25 @@ def test_a_point_cloud_repair_drops_nan_repeated_and_stray_points_and_keeps_the_
         np.testing.assert_array_equal(saved["vertex_ids"], kept)
     reference = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 6).values
     np.testing.assert_allclose(hamsa.Eigenbasis.load(out).values, reference, rtol=1e-8, atol=1e-10)
+
+
+def test_a_point_cloud_in_pieces_keeps_its_largest_with_keep_largest_and_the_cli_warns(tmp_path, capsys):
+    pytest.importorskip("robust_laplacian", reason="point clouds need the [pointcloud] extra")
+    from hamsa.repair import repair_point_cloud
+
+    body = shapes.humanoid().scaled_to_unit_area().vertices
+    ball = 0.15 * shapes.sphere(500).vertices + [3.0, 0.0, 0.0]  # area 0.28 beside the body's 1
+    points = np.vstack([ball, body])
+    cloud, kept, report = repair_point_cloud(points, keep="largest")
+    assert report.dropped_pieces == 1 and str(report) == "repaired: 1 dropped pieces"
+    np.testing.assert_array_equal(kept, len(ball) + np.arange(len(body)))
+    np.testing.assert_array_equal(cloud.points, body)
+    assert repair_point_cloud(points)[0].n_components == 2  # keep="all" (the default) keeps both
+    path = tmp_path / "two.npy"
+    np.save(path, points)
+    out = tmp_path / "two.npz"
+    assert main(["basis", str(path), "-k", "4", "-o", str(out)]) == 0
+    assert f"has 2 disconnected pieces ({len(body)}, {len(ball)} points)" in capsys.readouterr().err
+    assert main(["basis", str(path), "-k", "4", "--repair", "-o", str(out)]) == 0
+    with np.load(out) as saved:
+        np.testing.assert_array_equal(saved["vertex_ids"], kept)

@@ -51,7 +51,8 @@ def _nonnegative_float(text: str) -> float:
 REPAIR_HELP = (
     "fix what has one right fix (duplicate or degenerate faces, non-manifold vertices, orientation, unreferenced "
     "vertices) and keep the largest connected component, instead of refusing the mesh; of a point cloud, drop "
-    "the points with NaN coordinates, repeated points and stray points far off the surface"
+    "the points with NaN coordinates, repeated points and stray points far off the surface, and keep its largest "
+    "piece"
 )
 
 
@@ -162,7 +163,7 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
         points_only = (point_format(path) or ("",))[0] in POINTS_ONLY
         vertices, faces = (read_point_array(path), None) if points_only else read_mesh_arrays(path)
         if faces is None or (len(faces) == 0 and point_format(path) is not None):
-            shape, kept, report = repair_point_cloud(vertices, **(cloud or {}))
+            shape, kept, report = repair_point_cloud(vertices, keep="largest", **(cloud or {}))
         else:
             shape, kept, report = repair_mesh(vertices, faces, keep="largest")
         if not report.changed:
@@ -171,9 +172,7 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
         return _Loaded(shape, kept, len(vertices))
     tufted = laplacian == "tufted"
     mesh = load_shape(path, manifold=not tufted, **(cloud or {}))
-    if isinstance(mesh, PointCloud):
-        return _Loaded(mesh, None, mesh.n_vertices)
-    if len(mesh.unreferenced_vertices):
+    if not isinstance(mesh, PointCloud) and len(mesh.unreferenced_vertices):
         raise MeshError(
             f"'{path}' has {len(mesh.unreferenced_vertices)} unreferenced vertices (no area: the mass matrix would "
             "be singular); --repair drops them and keeps the way back to the input's vertex ids"
@@ -184,21 +183,29 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
 
 
 def _unusual(mesh, tufted: bool) -> list[str]:
-    """What is unusual about a mesh but still gives right numbers, each with the option that changes it."""
+    """What is unusual about a mesh or a point cloud but still gives right numbers, each with the option that
+    changes it."""
+    from hamsa.pointcloud import PointCloud
+
     notes = []
-    if mesh.non_manifold_vertices.size and not tufted:
-        notes.append(
-            f"has {mesh.non_manifold_vertices.size} non-manifold vertices (first: {int(mesh.non_manifold_vertices[0])};"
-            " separate fans of faces meet there); the operators are defined, --repair splits them (new vertex ids)"
-        )
-    if not mesh.is_consistently_oriented and not tufted:
-        notes.append("has faces that are not consistently oriented; the spectrum is unaffected, --repair orients them")
+    if not isinstance(mesh, PointCloud) and not tufted:
+        if mesh.non_manifold_vertices.size:
+            notes.append(
+                f"has {mesh.non_manifold_vertices.size} non-manifold vertices (first: "
+                f"{int(mesh.non_manifold_vertices[0])}; separate fans of faces meet there); the operators are "
+                "defined, --repair splits them (new vertex ids)"
+            )
+        if not mesh.is_consistently_oriented:
+            notes.append(
+                "has faces that are not consistently oriented; the spectrum is unaffected, --repair orients them"
+            )
     count, labels = mesh.vertex_components
     if count > 1:
         sizes = np.sort(np.bincount(labels[labels >= 0]))[::-1]
         notes.append(
             f"has {count} disconnected pieces ({', '.join(map(str, sizes[:5]))}{', ...' if count > 5 else ''} "
-            "vertices), each with its own spectrum; --repair keeps the largest"
+            f"{'points' if isinstance(mesh, PointCloud) else 'vertices'}), each with its own spectrum; --repair "
+            "keeps the largest"
         )
     return notes
 

@@ -20,7 +20,8 @@ vertex i, so ground-truth correspondences can be carried over.
 
 A point cloud (:func:`repair_point_cloud`) loses its points with non-finite coordinates (the empty rows of
 a scan), repeated points (keeping the first) and stray points (:func:`hamsa.pointcloud.stray_points`:
-isolated points and small groups far off the surface, each of which would add a spurious low eigenpair).
+isolated points and small groups far off the surface, each of which would add a spurious low eigenpair),
+and optionally (``keep="largest"``) all but its largest piece (by mass) that the operator joins.
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ class PointCloudRepairReport(_Counts):
     non_finite_points: int = 0
     repeated_points: int = 0
     stray_points: int = 0
+    dropped_pieces: int = 0
 
 
 def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray, RepairReport]:
@@ -115,14 +117,18 @@ def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray
     return mesh, kept[used], RepairReport(**counts)
 
 
-def repair_point_cloud(points, **cloud_options) -> tuple[PointCloud, np.ndarray, PointCloudRepairReport]:
+def repair_point_cloud(
+    points, keep: str = "all", **cloud_options
+) -> tuple[PointCloud, np.ndarray, PointCloudRepairReport]:
     """Drop the points of a cloud that have no right place in it, in this order: points with a NaN or infinite
-    coordinate, points that repeat an earlier point exactly (the first is kept), and the stray points that
-    :func:`hamsa.pointcloud.stray_points` finds among the rest.
+    coordinate, points that repeat an earlier point exactly (the first is kept), the stray points that
+    :func:`hamsa.pointcloud.stray_points` finds among the rest and, with ``keep="largest"``, every piece of the
+    cloud (:attr:`~hamsa.pointcloud.PointCloud.vertex_components`) but the one of largest mass.
 
     Parameters
     ----------
     points : (n, 3) array
+    keep : "all" pieces, or "largest" (by the operator's mass; building the operators twice when it drops any)
     **cloud_options : the keywords of :class:`~hamsa.pointcloud.PointCloud` (``neighbors``, ...)
 
     Returns
@@ -132,6 +138,8 @@ def repair_point_cloud(points, **cloud_options) -> tuple[PointCloud, np.ndarray,
     the points are not an (n, 3) real array, or when what is left is not a valid cloud (too few points, huge
     coordinates).
     """
+    if keep not in ("all", "largest"):
+        raise MeshError(f"keep must be 'all' or 'largest', got {keep!r}")
     points = as_coordinates(points, "points")
     kept = np.flatnonzero(np.isfinite(points).all(axis=1))
     counts = {"non_finite_points": len(points) - len(kept)}
@@ -141,7 +149,14 @@ def repair_point_cloud(points, **cloud_options) -> tuple[PointCloud, np.ndarray,
     stray = stray_points(points[kept])
     counts["stray_points"] = len(stray)
     kept = np.delete(kept, stray)
-    return PointCloud(points[kept], **cloud_options), kept, PointCloudRepairReport(**counts)
+    cloud = PointCloud(points[kept], **cloud_options)
+    count, labels = cloud.vertex_components
+    counts["dropped_pieces"] = count - 1 if keep == "largest" else 0
+    if counts["dropped_pieces"]:
+        largest = np.argmax(np.bincount(labels, weights=cloud.operators[1].diagonal()))
+        kept = kept[labels == largest]
+        cloud = PointCloud(points[kept], **cloud_options)
+    return cloud, kept, PointCloudRepairReport(**counts)
 
 
 def orient_faces(mesh) -> TriMesh:
