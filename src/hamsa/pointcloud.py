@@ -77,6 +77,11 @@ class PointCloud:
         them; remove duplicates first), or if ``off_sheet`` is not a positive number or comes with
         ``separate_sheets=False``.
 
+    Warns
+    -----
+    InputWarning
+        If the cloud has :attr:`stray_points` (each adds a spurious low eigenpair).
+
     Examples
     --------
     >>> import hamsa
@@ -108,8 +113,7 @@ class PointCloud:
                 f"a point cloud needs more than neighbors = {neighbors} points for its local triangulations, "
                 f"got {len(points)}"
             )
-        tree = cKDTree(points)
-        distance, nearest = tree.query(points, k=2)
+        distance, nearest = cKDTree(points).query(points, k=min(STRAY_NEIGHBORS + 1, len(points)))
         repeated = np.flatnonzero(distance[:, 1] == 0)
         if len(repeated):
             i = int(repeated[0])
@@ -121,6 +125,16 @@ class PointCloud:
         points.flags.writeable = False
         self._points = points
         self._spacing = distance[:, 1]
+        self._stray = stray_points(points, (distance, nearest))
+        self._stray.flags.writeable = False
+        if len(self._stray):
+            warnings.warn(
+                f"{len(self._stray)} stray points ({format_ids(self._stray)}) lie more than {STRAY_JUMP:g} local "
+                "spacings from the rest of the cloud: each adds a spurious low eigenpair localized on it; "
+                "hamsa.repair.repair_point_cloud (--repair on the command line) drops them",
+                InputWarning,
+                stacklevel=2,
+            )
         self.neighbors = int(neighbors)
         self.mollify = float(mollify)
         self.separate_sheets = bool(separate_sheets)
@@ -153,17 +167,7 @@ class PointCloud:
         With ``separate_sheets`` the local triangulations are hamsa's own (:attr:`local_triangles`: each
         point's Delaunay star among the neighbours on its own sheet) and robust_laplacian builds the tufted
         intrinsic Delaunay operators of their union, each triangle weighted 1/3 as in Sharp & Crane;
-        without, it is robust_laplacian's ``point_cloud_laplacian`` (all ``neighbors`` nearest points).
-        Warns (:class:`~hamsa.errors.InputWarning`) when the cloud has :attr:`stray_points`."""
-        stray = self.stray_points
-        if len(stray):
-            warnings.warn(
-                f"{len(stray)} stray points ({format_ids(stray)}) lie more than {STRAY_JUMP:g} local spacings from "
-                "the rest of the cloud: each adds a spurious low eigenpair localized on it; "
-                "hamsa.repair.repair_point_cloud (--repair on the command line) drops them",
-                InputWarning,
-                stacklevel=2,
-            )
+        without, it is robust_laplacian's ``point_cloud_laplacian`` (all ``neighbors`` nearest points)."""
         try:
             import robust_laplacian
         except ImportError:
@@ -324,14 +328,11 @@ class PointCloud:
         edges.flags.writeable = False
         return edges
 
-    @cached_property
+    @property
     def stray_points(self) -> np.ndarray:
         """Indices (ascending) of the points :func:`stray_points` finds: isolated points and small groups off
         the sampled surface, such as scanner outliers (read-only; empty for a clean cloud)."""
-        nearest = self._neighbourhoods if self.neighbors >= STRAY_NEIGHBORS else None
-        stray = stray_points(self._points, nearest)
-        stray.flags.writeable = False
-        return stray
+        return self._stray
 
     @cached_property
     def vertex_components(self) -> tuple[int, np.ndarray]:
