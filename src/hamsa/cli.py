@@ -153,16 +153,14 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     faces not consistently oriented (the spectrum does not depend on it; normals do) and several pieces
     (each has its own spectrum). A point file (.xyz, .npy, a PLY without faces, ...) gives a PointCloud, built
     with the keywords ``cloud`` (:func:`_cloud_options`)."""
-    from hamsa.io import POINTS_ONLY, load_shape, point_format
+    from hamsa.io import load_shape
     from hamsa.pointcloud import PointCloud
 
     if repair:
-        from hamsa.io import read_mesh_arrays, read_point_array
         from hamsa.repair import repair_mesh, repair_point_cloud
 
-        points_only = (point_format(path) or ("",))[0] in POINTS_ONLY
-        vertices, faces = (read_point_array(path), None) if points_only else read_mesh_arrays(path)
-        if faces is None or (len(faces) == 0 and point_format(path) is not None):
+        vertices, faces = _file_arrays(path)
+        if faces is None:
             shape, kept, report = repair_point_cloud(vertices, keep="largest", **(cloud or {}))
         else:
             shape, kept, report = repair_mesh(vertices, faces, keep="largest")
@@ -180,6 +178,17 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     for warning in _unusual(mesh, tufted):
         print(f"warning: '{path}' {warning}", file=sys.stderr)
     return _Loaded(mesh, None, mesh.n_vertices)
+
+
+def _file_arrays(path: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """The raw (vertices, faces) of a mesh file, or (points, None) of a point file (a points-only format, or an
+    OFF / OBJ / PLY without faces), before any validation."""
+    from hamsa.io import POINTS_ONLY, point_format, read_mesh_arrays, read_point_array
+
+    if (point_format(path) or ("",))[0] in POINTS_ONLY:
+        return read_point_array(path), None
+    vertices, faces = read_mesh_arrays(path)
+    return vertices, None if len(faces) == 0 and point_format(path) is not None else faces
 
 
 def _unusual(mesh, tufted: bool) -> list[str]:
@@ -578,13 +587,26 @@ def _info(args) -> None:
     from hamsa.io import load_shape
     from hamsa.mesh import format_ids
     from hamsa.pointcloud import STRAY_JUMP, PointCloud
+    from hamsa.repair import repair_point_cloud
 
-    mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
+    dropped = ""
+    try:
+        mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
+    except MeshError as error:  # a cloud with NaN or repeated points: described without them
+        points, faces = _file_arrays(args.mesh)
+        if faces is not None:
+            raise
+        try:
+            mesh, _, report = repair_point_cloud(points, **_cloud_options(args))
+        except MeshError:
+            raise error from None
+        dropped = f" of {len(points)} in the file; the lines below leave out {str(report).removeprefix('repaired: ')}"
+        dropped += " (--repair drops them too)"
     _check_cloud_options(args, mesh)
     if isinstance(mesh, PointCloud):
         cloud = mesh
         print(f"point cloud     {args.mesh}")
-        print(f"points          {cloud.n_vertices}")
+        print(f"points          {cloud.n_vertices}{dropped}")
         print(f"area            {cloud.area:.6g} (the point-cloud Laplacian's mass, {cloud.neighbors} neighbours)")
         print(f"bounding box    diagonal {cloud.bounding_box_diagonal:.6g}")
         print(f"mean spacing    {cloud.mean_spacing:.6g}")
