@@ -150,8 +150,8 @@ def repair_point_cloud(
     counts["stray_points"] = len(stray)
     kept = np.delete(kept, stray)
     cloud = PointCloud(points[kept], **cloud_options)
-    count, labels = cloud.vertex_components
-    counts["dropped_pieces"] = count - 1 if keep == "largest" else 0
+    count, labels = cloud.vertex_components if keep == "largest" else (1, None)
+    counts["dropped_pieces"] = count - 1
     if counts["dropped_pieces"]:
         largest = np.argmax(np.bincount(labels, weights=cloud.operators[1].diagonal()))
         kept = kept[labels == largest]
