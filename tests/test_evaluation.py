@@ -155,3 +155,19 @@ def test_exact_kim_scores_and_their_errors(body, monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "pygeodesic.geodesic", None)
     with pytest.raises(hamsa.errors.MissingDependencyError, match=r"hamsa\[geodesics\]"):
         hamsa.geodesic.geodesic_distance(body, [0], method="exact")
+
+
+def test_map_distortion_tells_a_map_along_the_surface_from_a_scrambled_one_without_ground_truth():
+    from hamsa.evaluation import map_distortion
+
+    rest = shapes.humanoid("rest").scaled_to_unit_area()
+    walk = shapes.humanoid("walk").scaled_to_unit_area()
+    n = rest.n_vertices
+    true = map_distortion(rest, walk, np.arange(n))  # the poses share vertex ids: the identity is the truth
+    scrambled = map_distortion(rest, walk, np.random.default_rng(0).integers(0, n, n))
+    # measured 0.012 against 0.35; a map with replacement hits about 1 - 1/e of the target
+    assert true["coverage"] == 1.0 and true["distortion"] < 0.03 and true["pairs"] == 30 * 1000
+    assert scrambled["distortion"] > 10 * true["distortion"] and 0.55 < scrambled["coverage"] < 0.7
+    assert map_distortion(rest, rest, np.arange(n))["distortion"] == 0.0
+    with pytest.raises(HamsaError, match="integer target ids"):
+        map_distortion(rest, walk, np.arange(n - 1))

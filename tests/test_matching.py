@@ -392,14 +392,17 @@ def test_cli_match_defaults_to_the_hamiltonian_matching_basis(tmp_path, capsys):
     rest, walk = shapes.humanoid("rest", spacing=0.05), shapes.humanoid("walk", spacing=0.05)
     hamsa.save_mesh(rest, tmp_path / "rest.off")
     hamsa.save_mesh(walk, tmp_path / "walk.off")
-    auc = {}
+    auc, distortion = {}, {}
     for basis in ("hamiltonian", "lbo"):
         out = tmp_path / f"{basis}.npy"
         command = ["match", str(tmp_path / "rest.off"), str(tmp_path / "walk.off"), "--method", "hks", "-o", str(out)]
         assert main(command + (["--basis", basis] if basis == "lbo" else [])) == 0
         auc[basis] = summary(geodesic_errors(walk, np.load(out), np.arange(rest.n_vertices)))["auc"]
-        assert ("matching potential basis" if basis == "hamiltonian" else "LBO basis") in capsys.readouterr().out
+        printed = capsys.readouterr().out
+        assert ("matching potential basis" if basis == "hamiltonian" else "LBO basis") in printed
+        distortion[basis] = float(printed.split("distortion")[1].split()[0])  # measured without ground truth
     assert auc["hamiltonian"] > auc["lbo"] + 0.2, auc
+    assert distortion["hamiltonian"] < distortion["lbo"], distortion
 
 
 @pytest.mark.parametrize("method", ["fmap", "hks", "wks", "icskm"])

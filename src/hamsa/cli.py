@@ -834,7 +834,7 @@ def _modes(args) -> None:
 
 
 def _match(args) -> None:
-    from hamsa.evaluation import THRESHOLDS, map_scores
+    from hamsa.evaluation import THRESHOLDS, map_distortion, map_scores
     from hamsa.files import atomic_write
     from hamsa.matching import functional_from_map, match
     from hamsa.matching.pipeline import START_K
@@ -849,7 +849,7 @@ def _match(args) -> None:
     k = max(args.k, least)
     if k != args.k:
         print(f"-k {args.k} is too few for {args.method}: using k = {k}", file=sys.stderr)
-    with _Steps(args, 7) as step:
+    with _Steps(args, 8) as step:
         step("reading the meshes")
         loaded = [
             _load_for_operators(path, args.repair, cloud=_cloud_options(args)) for path in (args.source, args.target)
@@ -874,6 +874,8 @@ def _match(args) -> None:
         if truth is not None:
             step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
             scores = map_scores(meshes[1], mapping, truth, args.points, geodesics=args.geodesics)
+        step("measuring the map's distortion")
+        quality = map_distortion(*meshes, mapping)
     saved = _in_input_ids(mapping, *loaded) if any(item.vertex_ids is not None for item in loaded) else mapping
     if saved is not mapping:
         print(f"map in input vertex ids; {int(np.sum(saved < 0))} source vertices removed by --repair map to -1")
@@ -882,6 +884,11 @@ def _match(args) -> None:
     print(
         f"{args.method} ({basis} basis): mapped {len(mapping)} source vertices onto {meshes[1].n_vertices} target "
         f"vertices (k = {k}) in {time.perf_counter() - start:.1f} s"
+    )
+    print(
+        f"distortion      {quality['distortion']:.4f} geodesic (mean |d_T(f a, f b) - d_S(a, b)| / sqrt(area) over "
+        f"{quality['pairs']} pairs; an isometry or its mirror image 0), target area covered "
+        f"{100 * quality['coverage']:.1f}%"
     )
     if args.fmap:
         with atomic_write(outputs["fmap"]) as handle:

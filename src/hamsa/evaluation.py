@@ -157,3 +157,53 @@ def map_scores(
     chosen = evaluated_points(truth, points, seed)
     errors = geodesic_errors(target, mapping[chosen], truth[chosen], geodesics=geodesics)
     return {**summary(errors), "points": len(chosen), "curve": error_curve(errors).tolist()}
+
+
+def map_distortion(source, target, map_source_to_target, sources: int = 30, points: int = 1000, seed: int = 0) -> dict:
+    """How far a point map is from an isometry onto the whole target, measured without ground truth.
+
+    ``distortion``: the mean over ``sources`` x ``points`` seeded source vertex pairs (a, b) of
+    ``|d_T(f(a), f(b)) / sqrt(area_T) - d_S(a, b) / sqrt(area_S)|``, heat-method geodesics on each shape (on a
+    cloud, the point-cloud heat method); pairs in different pieces of either shape are left out. ``coverage``:
+    the fraction of the target's area (its operator's lumped mass) at the vertices the map hits. A map between
+    two poses that follows the surface has a small distortion and covers most of the target; a map that
+    swaps or folds parts has a large one. An isometry's mirror image scores as well as the isometry itself:
+    only ground truth (:func:`map_scores`) tells the two apart.
+
+    Parameters
+    ----------
+    source, target : TriMesh (or pair) or PointCloud
+    map_source_to_target : (n_source,) target vertex ids
+    sources, points : how many seeded source vertices carry geodesics (each a heat-method solve on both
+        shapes) and how many they are measured to
+
+    Returns
+    -------
+    dict with ``distortion``, ``median_distortion`` (in units of sqrt(area)), ``coverage`` in [0, 1] and
+    ``pairs`` (how many were measured).
+    """
+    from hamsa.operators import laplacian_operators
+
+    source, target = as_shape(source), as_shape(target)
+    mapping = np.asarray(map_source_to_target)
+    if mapping.shape != (source.n_vertices,) or not np.issubdtype(mapping.dtype, np.integer):
+        raise HamsaError(f"the map must be ({source.n_vertices},) integer target ids, got {mapping.shape}")
+    if mapping.min() < 0 or mapping.max() >= target.n_vertices:
+        raise HamsaError(f"the map's ids must be in [0, {target.n_vertices}) (target vertices)")
+    a = sample_points(source.n_vertices, sources, seed)
+    b = sample_points(source.n_vertices, points, seed + 1)
+    mass_s = laplacian_operators(source)[1].diagonal()
+    mass_t = laplacian_operators(target)[1].diagonal()
+    on_source = geodesic_solver(source).distances_from(a)[b] / np.sqrt(mass_s.sum())
+    on_target = geodesic_solver(target).distances_from(mapping[a])[mapping[b]] / np.sqrt(mass_t.sum())
+    difference = np.abs(on_target - on_source)[np.isfinite(on_source) & np.isfinite(on_target)]
+    if difference.size == 0:
+        raise HamsaError("no measured pair lies in one piece of both shapes")
+    hit = np.zeros(target.n_vertices, dtype=bool)
+    hit[mapping] = True
+    return {
+        "distortion": float(difference.mean()),
+        "median_distortion": float(np.median(difference)),
+        "coverage": float(mass_t[hit].sum() / mass_t.sum()),
+        "pairs": int(difference.size),
+    }
