@@ -169,8 +169,8 @@ def test_modes_and_optimize_take_a_point_file(tmp_path):
     pytest.importorskip("robust_laplacian", reason="point clouds need the [pointcloud] extra")
     from hamsa.cmm import compressed_modes
 
-    points = tmp_path / "capsule.npy"
-    np.save(points, shapes.capsule().vertices)
+    points = tmp_path / "humanoid.npy"
+    np.save(points, shapes.humanoid(spacing=0.05).vertices)
     out = tmp_path / "modes.npz"
     assert main(["modes", str(points), "-k", "2", "--mu", "30", "--neighbors", "20", "-o", str(out), "-q"]) == 0
     expected = compressed_modes(hamsa.PointCloud(np.load(points), neighbors=20), k=2, mu=30.0).modes
