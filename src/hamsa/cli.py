@@ -157,9 +157,10 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     from hamsa.pointcloud import PointCloud
 
     if repair:
+        from hamsa.io import read_shape_arrays
         from hamsa.repair import repair_mesh, repair_point_cloud
 
-        vertices, faces = _file_arrays(path)
+        vertices, faces = read_shape_arrays(path)
         if faces is None:
             shape, kept, report = repair_point_cloud(vertices, keep="largest", **(cloud or {}))
         else:
@@ -178,17 +179,6 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     for warning in _unusual(mesh, tufted):
         print(f"warning: '{path}' {warning}", file=sys.stderr)
     return _Loaded(mesh, None, mesh.n_vertices)
-
-
-def _file_arrays(path: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """The raw (vertices, faces) of a mesh file, or (points, None) of a point file (a points-only format, or an
-    OFF / OBJ / PLY without faces), before any validation."""
-    from hamsa.io import POINTS_ONLY, point_format, read_mesh_arrays, read_point_array
-
-    if (point_format(path) or ("",))[0] in POINTS_ONLY:
-        return read_point_array(path), None
-    vertices, faces = read_mesh_arrays(path)
-    return vertices, None if len(faces) == 0 and point_format(path) is not None else faces
 
 
 def _unusual(mesh, tufted: bool) -> list[str]:
@@ -584,7 +574,7 @@ def _output_path(args, suffix: str | None = None, *inputs) -> Path:
 
 
 def _info(args) -> None:
-    from hamsa.io import load_shape
+    from hamsa.io import load_shape, read_shape_arrays
     from hamsa.mesh import format_ids
     from hamsa.pointcloud import STRAY_JUMP, PointCloud
     from hamsa.repair import repair_point_cloud
@@ -593,7 +583,7 @@ def _info(args) -> None:
     try:
         mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
     except MeshError as error:  # a cloud with NaN or repeated points: described without them
-        points, faces = _file_arrays(args.mesh)
+        points, faces = read_shape_arrays(args.mesh)
         if faces is not None:
             raise
         try:

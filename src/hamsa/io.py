@@ -65,15 +65,23 @@ def load_shape(
     :class:`~hamsa.pointcloud.PointCloud` (a mesh ignores them). Raises
     MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
     """
-    if _suffix(path)[0] in POINTS_ONLY:
-        return load_point_cloud(path, neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
+    vertices, faces = read_shape_arrays(path)
     try:
-        vertices, faces = read_mesh_arrays(path)
-        if len(faces) == 0:
+        if faces is None:
             return PointCloud(vertices, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
         return TriMesh(vertices, faces, manifold=manifold)
     except MeshError as exc:
         raise _naming(path, exc) from None
+
+
+def read_shape_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]:
+    """The raw ``(vertices, faces)`` of a mesh file, or ``(points, None)`` of a point file (a points-only format,
+    or an OFF / OBJ / PLY / STL without faces), before any validation: what :func:`load_shape` builds its
+    shape from. Raises MeshError naming the file if it cannot be read or parsed."""
+    if _suffix(path)[0] in POINTS_ONLY:
+        return read_point_array(path), None
+    vertices, faces = read_mesh_arrays(path)
+    return vertices, faces if len(faces) else None
 
 
 def load_point_cloud(
