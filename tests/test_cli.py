@@ -84,6 +84,39 @@ def test_a_potential_file_of_the_input_follows_repair(tmp_path, capsys):
     np.testing.assert_allclose(saved.values, hamsa.eigenbasis(capsule, 5, V[1:]).values, rtol=1e-10)
 
 
+def test_optimize_with_repair_reads_and_writes_values_per_input_vertex(tmp_path, capsys):
+    """After --repair drops a loose vertex, optimize's --data is read per input vertex (as a potential file
+    is), its potential is written per input vertex with NaN at the dropped one, equal to the Python API's on
+    the repaired mesh, and basis/view read it back through --repair; a wrong row count names both counts."""
+    from hamsa.optimize import optimize_potential
+
+    capsule = shapes.capsule(n_around=16)
+    path = tmp_path / "loose.off"
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], capsule.vertices]), capsule.faces + 1), path)
+    data = np.vstack([[5.0, 5.0, 5.0], capsule.vertices**2])  # per input vertex; the loose row is ignored
+    np.save(tmp_path / "data.npy", data)
+    out = tmp_path / "v.npy"
+    command = ["optimize", str(path), "--repair", "--data", str(tmp_path / "data.npy"), "-k", "5", "-m", "30"]
+    assert main([*command, "--iterations", "7", "-o", str(out)]) == 0
+    assert "7 iterations" in capsys.readouterr().out  # --iterations counts them all, over every stage
+    written = np.load(out)
+    expected = optimize_potential(capsule, capsule.vertices**2, 5, m=30, max_iterations=7)
+    assert written.shape == (capsule.n_vertices + 1,) and np.isnan(written[0])
+    np.testing.assert_allclose(written[1:], expected.potential, rtol=1e-8, atol=1e-10)
+    basis = tmp_path / "b.npz"
+    assert main(["basis", str(path), "--repair", "--potential", str(out), "-k", "5", "-q", "-o", str(basis)]) == 0
+    np.testing.assert_allclose(
+        hamsa.Eigenbasis.load(basis).values, hamsa.eigenbasis(capsule, 5, expected.potential).values, rtol=1e-9
+    )
+    assert main(["view", str(path), "--repair", "--field", str(out), "-o", str(tmp_path / "v.html")]) == 0
+    np.save(tmp_path / "short.npy", data[:10])
+    capsys.readouterr()
+    assert main([*command[:4], str(tmp_path / "short.npy"), *command[5:], "-o", str(tmp_path / "w.npy")]) == 2
+    assert f"expected {capsule.n_vertices + 1} (the input's) or {capsule.n_vertices} (after --repair)" in (
+        capsys.readouterr().err
+    )
+
+
 @pytest.mark.parametrize(
     "case, message",
     [

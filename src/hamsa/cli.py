@@ -261,7 +261,11 @@ def _parser() -> argparse.ArgumentParser:
     optimize.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     optimize.add_argument("--repair", action="store_true", help=REPAIR_HELP)
     optimize.add_argument("-k", type=_positive_int, required=True, help="number of eigenvectors")
-    optimize.add_argument("--data", help="(n,) or (n, d) .npy to represent (default: the vertex coordinates)")
+    optimize.add_argument(
+        "--data",
+        help="(n,) or (n, d) .npy to represent, one row per vertex (of the input, with --repair; default: the vertex "
+        "coordinates)",
+    )
     optimize.add_argument(
         "-m", type=_positive_int, help="LBO eigenvectors of the reduced problem (default max(4k, k+100))"
     )
@@ -525,7 +529,7 @@ def _potential(text: str | None, loaded: _Loaded) -> np.ndarray | None:
     """``--potential``: a specification (:func:`hamsa.potentials.from_spec`, vertex ids of the input) or a
     file with one value per vertex of the mesh used or, after ``--repair``, of the input."""
     from hamsa.errors import PotentialError
-    from hamsa.files import load_array, read_text
+    from hamsa.files import read_text
     from hamsa.operators import check_potential
     from hamsa.potentials import from_spec
 
@@ -533,23 +537,51 @@ def _potential(text: str | None, loaded: _Loaded) -> np.ndarray | None:
         return None
     if _potential_file(text) is None:
         return from_spec(loaded.mesh, text, loaded.vertex_ids)
-    n = loaded.mesh.n_vertices
-    rows = n if loaded.vertex_ids is None else None  # after a repair: the mesh's count or the input's
     try:
         if text.endswith(".npy"):
-            values = load_array(text, ndim=(1, 2), rows=rows)
+            values = _vertex_array(text, loaded)
         else:
-            values = np.loadtxt(io.StringIO(read_text(text)), ndmin=1)
+            values = _per_vertex(np.loadtxt(io.StringIO(read_text(text)), ndmin=1), loaded, f"'{text}'")
     except HamsaError as exc:
         raise PotentialError(f"potential: {exc}") from None
     except ValueError as exc:
         raise PotentialError(f"cannot read potential '{text}': {exc}") from None
-    if loaded.vertex_ids is not None and len(values) == loaded.input_vertices != n:
-        values = values[loaded.vertex_ids]  # one value per input vertex: those the repair kept
     try:
-        return check_potential(values, n)
+        return check_potential(values, loaded.mesh.n_vertices)
     except PotentialError as exc:
         raise PotentialError(f"'{text}': {exc}") from None
+
+
+def _vertex_array(path: str, loaded: _Loaded) -> np.ndarray:
+    """An (n,) or (n, d) ``.npy`` array of values per vertex, by :func:`_per_vertex`'s rule."""
+    from hamsa.files import load_array
+
+    rows = loaded.mesh.n_vertices if loaded.vertex_ids is None else None  # after a repair: either count
+    return _per_vertex(load_array(path, ndim=(1, 2), rows=rows), loaded, f"'{path}'")
+
+
+def _per_vertex(values: np.ndarray, loaded: _Loaded, what: str) -> np.ndarray:
+    """Values given per vertex of the shape used or, after ``--repair``, per vertex of the input (the rows of
+    the vertices the repair kept are taken): the ids every output of a repaired shape is written in."""
+    n = loaded.mesh.n_vertices
+    if loaded.vertex_ids is not None and len(values) == loaded.input_vertices != n:
+        return values[loaded.vertex_ids]
+    if len(values) != n:
+        counts = (
+            f"{n}" if loaded.vertex_ids is None else f"{loaded.input_vertices} (the input's) or {n} (after --repair)"
+        )
+        raise HamsaError(f"{what} has {len(values)} rows; expected {counts}, one per vertex")
+    return values
+
+
+def _in_input_vertices(values: np.ndarray, loaded: _Loaded) -> np.ndarray:
+    """Per-vertex values of a repaired shape written per input vertex, NaN at the vertices the repair dropped
+    (:func:`_per_vertex` reads them back); values of a shape used as given are returned as they are."""
+    if loaded.vertex_ids is None:
+        return values
+    full = np.full((loaded.input_vertices, *values.shape[1:]), np.nan)
+    full[loaded.vertex_ids] = values
+    return full
 
 
 def _load_ids(path: str) -> np.ndarray:
@@ -700,16 +732,14 @@ def _basis(args) -> None:
 
 
 def _optimize(args) -> None:
-    from hamsa.files import atomic_write, load_array
+    from hamsa.files import atomic_write
     from hamsa.optimize import optimize_potential
 
     output = _output_path(args, ".npy", args.mesh, args.data)
-    mesh = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args)).mesh
+    loaded = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
+    mesh = loaded.mesh
     _check_cloud_options(args, mesh)
-    if args.data:
-        data = load_array(args.data, ndim=(1, 2), rows=mesh.n_vertices)
-    else:
-        data = mesh.vertices
+    data = _vertex_array(args.data, loaded) if args.data else mesh.vertices
     start = time.perf_counter()
     optimizer = {"smoothing": (), "rounds": 1, "max_iterations": 200} if args.plain else {}
     if args.iterations is not None:
@@ -725,7 +755,7 @@ def _optimize(args) -> None:
         **optimizer,
     )
     with atomic_write(output) as handle:
-        np.save(handle, result.potential)
+        np.save(handle, _in_input_vertices(result.potential, loaded))
     print(
         f"representation error{' of the centred data' if args.center else ''} with k = {args.k}: LBO "
         f"{result.lbo_loss:.4g}, optimized Hamiltonian "
@@ -736,7 +766,12 @@ def _optimize(args) -> None:
         f"{len(result.history) - 1} iterations ({'plain' if args.plain else 'smoothed, then plain'}), "
         f"{time.perf_counter() - start:.1f} s"
     )
-    print(f"wrote           {output}")
+    dropped = (
+        ""
+        if loaded.vertex_ids is None
+        else f" (one value per input vertex; NaN at the {loaded.input_vertices - mesh.n_vertices} --repair dropped)"
+    )
+    print(f"wrote           {output}{dropped}")
 
 
 def _compress(args) -> None:
@@ -1087,13 +1122,13 @@ def _view_fields(args, shape: _Loaded) -> tuple[dict, str]:
     their column in ``basis.vectors`` (0-based, as in Python); a constant first one is left out unless
     ``--constant``."""
     from hamsa.eigen import Eigenbasis, eigenbasis
-    from hamsa.files import load_array, load_npz
+    from hamsa.files import load_npz
 
     n = shape.mesh.n_vertices
     if args.field:
         fields = {}
         for path in args.field:
-            values = load_array(path, ndim=(1, 2), rows=n)
+            values = _vertex_array(path, shape)
             columns = values.reshape(n, -1)
             fields |= {Path(path).stem + ("" if values.ndim == 1 else f"[:, {j}]"): c for j, c in enumerate(columns.T)}
         return fields, "fields"

@@ -375,20 +375,28 @@ def _minimize(subspace, n: int, square: bool, max_iterations: int, rounds: int, 
          "width": 0.0, "seconds": 0.0}
     )  # fmt: skip
     widths = [factor * _spacing_at_k(problem, to_V(x)) for factor in smoothing] + [0.0]
-    per_round = max(1, max_iterations // (rounds * len(widths)))
+    # max_iterations shared by the rounds of all stages, the remainder going to the last ones (the paper's
+    # loss); with fewer iterations than rounds the first rounds get none
+    count = rounds * len(widths)
+    shares = np.full(count, max_iterations // count)
+    shares[count - max_iterations % count :] += 1
+    budgets = iter(shares.tolist())
     try:
         for width in widths:
+            stage = [next(budgets) for _ in range(rounds)]
+            if not any(stage):
+                continue
             before = (x, problem, problem.loss(to_V(x)))  # the paper's loss: problem.width is 0 here
             problem.width = width
             current = problem.loss(to_V(x))
-            for _ in range(rounds):
+            for budget in filter(None, stage):
                 result = sopt.minimize(
                     objective,
                     x,
                     jac=True,
                     method="L-BFGS-B",
                     callback=record,
-                    options={"maxiter": per_round, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20},
+                    options={"maxiter": budget, "ftol": 1e-14, "gtol": 1e-14, "maxcor": 20},
                 )
                 # Trust the reduced model only where it is accurate: re-center the subspace at the new V and
                 # accept the step only if this stage's loss there (the true one, up to the loose basis)
