@@ -26,15 +26,16 @@ and optionally (``keep="largest"``) all but its largest piece (by mass) that the
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from hamsa.errors import MeshError
+from hamsa.errors import InputWarning, MeshError
 from hamsa.mesh import TriMesh, as_coordinates, as_trimesh
-from hamsa.pointcloud import PointCloud, stray_points
+from hamsa.pointcloud import PointCloud
 
 
 class _Counts:
@@ -146,10 +147,14 @@ def repair_point_cloud(
     _, first = np.unique(points[kept], axis=0, return_index=True)
     counts["repeated_points"] = len(kept) - len(first)
     kept = kept[np.sort(first)]
-    stray = stray_points(points[kept])
+    with warnings.catch_warnings():  # the cloud's own stray-point warning: those points are dropped here
+        warnings.simplefilter("ignore", InputWarning)
+        cloud = PointCloud(points[kept], **cloud_options)
+    stray = cloud.stray_points
     counts["stray_points"] = len(stray)
-    kept = np.delete(kept, stray)
-    cloud = PointCloud(points[kept], **cloud_options)
+    if len(stray):
+        kept = np.delete(kept, stray)
+        cloud = PointCloud(points[kept], **cloud_options)
     count, labels = cloud.vertex_components if keep == "largest" else (1, None)
     counts["dropped_pieces"] = count - 1
     if counts["dropped_pieces"]:
