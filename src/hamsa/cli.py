@@ -861,6 +861,7 @@ def _modes(args) -> None:
 def _match(args) -> None:
     from hamsa.evaluation import THRESHOLDS, map_distortion, map_scores
     from hamsa.files import atomic_write
+    from hamsa.geodesic import geodesic_solver
     from hamsa.matching import functional_from_map, match
     from hamsa.matching.pipeline import START_K
 
@@ -896,11 +897,13 @@ def _match(args) -> None:
             commutativity_weight=args.commutativity,
             orientation_weight=args.orientation,
         )
+        solver = None  # the target's geodesics, built once for the scores and the distortion
         if truth is not None:
             step(f"scoring at {min(args.points, int(np.sum(truth >= 0)))} vertices (Kim et al.)")
-            scores = map_scores(meshes[1], mapping, truth, args.points, geodesics=args.geodesics)
+            solver = geodesic_solver(meshes[1], method=args.geodesics)
+            scores = map_scores(meshes[1], mapping, truth, args.points, solver=solver)
         step("measuring the map's distortion")
-        quality = map_distortion(*meshes, mapping)
+        quality = map_distortion(*meshes, mapping, target_solver=solver if args.geodesics == "heat" else None)
     saved = _in_input_ids(mapping, *loaded) if any(item.vertex_ids is not None for item in loaded) else mapping
     if saved is not mapping:
         print(f"map in input vertex ids; {int(np.sum(saved < 0))} source vertices removed by --repair map to -1")

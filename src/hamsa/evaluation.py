@@ -142,24 +142,32 @@ def evaluated_points(ground_truth, count: int = 1000, seed: int = 0) -> np.ndarr
 
 
 def map_scores(
-    target, map_source_to_target, ground_truth, points: int = 1000, seed: int = 0, geodesics: str = "heat"
+    target,
+    map_source_to_target,
+    ground_truth,
+    points: int = 1000,
+    seed: int = 0,
+    geodesics: str = "heat",
+    solver=None,
 ) -> dict:
     """The Kim et al. scores of a point map: :func:`summary` of the geodesic errors at ``points`` source
     vertices (:func:`evaluated_points`), plus ``points`` (how many) and ``curve`` (the cumulative curve on
     :data:`THRESHOLDS`). ``map_source_to_target`` and ``ground_truth``: (n_s,) target ids, -1 in the
-    truth where unknown; ``geodesics``: ``"heat"`` or ``"exact"`` (:func:`geodesic_errors`). What
-    ``hamsa match --truth`` reports."""
+    truth where unknown; ``geodesics``: ``"heat"`` or ``"exact"``, or a ``solver`` of the target to reuse
+    (:func:`geodesic_errors`). What ``hamsa match --truth`` reports."""
     mapping, truth = np.asarray(map_source_to_target), np.asarray(ground_truth)
     if mapping.shape != truth.shape:
         raise HamsaError(
             f"the map has shape {mapping.shape}, the ground truth {truth.shape}: one entry per source vertex"
         )
     chosen = evaluated_points(truth, points, seed)
-    errors = geodesic_errors(target, mapping[chosen], truth[chosen], geodesics=geodesics)
+    errors = geodesic_errors(target, mapping[chosen], truth[chosen], solver=solver, geodesics=geodesics)
     return {**summary(errors), "points": len(chosen), "curve": error_curve(errors).tolist()}
 
 
-def map_distortion(source, target, map_source_to_target, sources: int = 30, points: int = 1000, seed: int = 0) -> dict:
+def map_distortion(
+    source, target, map_source_to_target, sources: int = 30, points: int = 1000, seed: int = 0, target_solver=None
+) -> dict:
     """How far a point map is from an isometry onto the whole target, measured without ground truth.
 
     ``distortion``: the mean over ``sources`` x ``points`` seeded source vertex pairs (a, b) of
@@ -176,6 +184,7 @@ def map_distortion(source, target, map_source_to_target, sources: int = 30, poin
     map_source_to_target : (n_source,) target vertex ids
     sources, points : how many seeded source vertices carry geodesics (each a heat-method solve on both
         shapes) and how many they are measured to
+    target_solver : the target's heat-method solver (:func:`hamsa.geodesic.geodesic_solver`) to reuse
 
     Returns
     -------
@@ -195,7 +204,8 @@ def map_distortion(source, target, map_source_to_target, sources: int = 30, poin
     mass_s = laplacian_operators(source)[1].diagonal()
     mass_t = laplacian_operators(target)[1].diagonal()
     on_source = geodesic_solver(source).distances_from(a)[b] / np.sqrt(mass_s.sum())
-    on_target = geodesic_solver(target).distances_from(mapping[a])[mapping[b]] / np.sqrt(mass_t.sum())
+    on_target = (target_solver or geodesic_solver(target)).distances_from(mapping[a])[mapping[b]]
+    on_target /= np.sqrt(mass_t.sum())
     difference = np.abs(on_target - on_source)[np.isfinite(on_source) & np.isfinite(on_target)]
     if difference.size == 0:
         raise HamsaError("no measured pair lies in one piece of both shapes")
