@@ -107,7 +107,7 @@ def mesh_files() -> dict[str, bytes]:
         "zero_area.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n",
         "duplicate_faces.off": f"OFF\n4 3 0\n{SQUARE_VERTICES}3 0 1 2\n3 0 2 3\n3 2 1 0\n".encode(),
         "nonmanifold_edge.off": b"OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n3 0 1 2\n3 1 0 3\n3 0 1 4\n",
-        "quad.off": f"OFF\n4 1 0\n{SQUARE_VERTICES}4 0 1 2 3\n".encode(),
+        "self_crossing_polygon.off": b"OFF\n5 1 0\n0 0 0\n2 0 0\n0 2 0\n2 2 0\n1 3 0\n5 0 1 2 3 4\n",
         "binary_ply_short.ply": b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
         b"property float y\nproperty float z\nelement face 1\n"
         b"property list uchar int vertex_indices\nend_header\n\x00\x00\x80",

@@ -63,7 +63,10 @@ def test_ascii_stl_and_ascii_ply_and_obj_variants(tmp_path):
         ("empty.off", b"", "empty"),
         ("garbage.off", b"\x00\x01\x02garbage", "OFF"),
         ("counts.off", b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "promises 4 vertices"),
-        ("quad.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n", "triangle mesh"),
+        ("line.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 0 1\n", "a face needs at least 3"),
+        ("short.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2\n", "fewer than its 4 vertex indices"),
+        ("quad.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 7\n", "face 0 references vertex 6"),
+        ("bowtie.obj", b"v 0 0 0\nv 2 0 0\nv 0 2 0\nv 2 2 0\nv 1 3 0\nf 1 2 3 4 5\n", "crosses itself"),
         ("nan.off", b"OFF\n3 1 0\n0 0 nan\n1 0 0\n0 1 0\n3 0 1 2\n", "non-finite"),
         ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "references vertex 8"),
         (
@@ -188,3 +191,63 @@ def test_vertex_colours_are_read_from_ply_coff_and_obj_and_make_the_texture_pote
     bright.write_text("v 0 0 0 300 0 0\nv 1 0 0 0 0 0\nv 0 1 0 0 0 0\nf 1 2 3\n")
     with pytest.raises(MeshError, match="outside"):
         read_vertex_colors(bright)
+
+
+def _polygon_grid():
+    """A 5 x 5 grid of unit cells in the plane z = 0 (area 25) written as mixed polygons: quads, two triangles,
+    a hexagon with straight corners and an L-shaped (non-convex) heptagon whose fan from its first corner
+    would fold over: (vertices, polygons)."""
+    xs, ys = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    vertices = np.c_[xs.ravel(), ys.ravel(), np.zeros(36)]
+
+    def at(i, j):
+        return j * 6 + i
+
+    def cell(i, j):
+        return [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]
+
+    polygons = [cell(i, j) for j in range(2) for i in range(5)]
+    polygons.append([at(0, 2), at(1, 2), at(2, 2), at(2, 3), at(1, 3), at(0, 3)])  # cells (0, 2), (1, 2)
+    polygons += [[at(2, 2), at(3, 2), at(3, 3)], [at(2, 2), at(3, 3), at(2, 3)]]  # cell (2, 2)
+    polygons += [cell(3, 2), cell(4, 2), cell(2, 3), cell(3, 3), cell(4, 3)]
+    # cells (0, 3), (1, 3), (0, 4), starting at the corner next to the reflex one (1, 4)
+    polygons.append([at(2, 4), at(1, 4), at(1, 5), at(0, 5), at(0, 3), at(1, 3), at(2, 3)])
+    polygons += [cell(i, 4) for i in range(1, 5)]
+    return vertices, polygons
+
+
+def _write_polygons(path, vertices, polygons, kind):
+    if kind == "off":
+        lines = ["OFF", f"{len(vertices)} {len(polygons)} 0"] + [f"{x:g} {y:g} {z:g}" for x, y, z in vertices]
+        path.write_text("\n".join(lines + [" ".join(map(str, [len(p), *p])) for p in polygons]) + "\n")
+    elif kind == "obj":
+        lines = [f"v {x:g} {y:g} {z:g}" for x, y, z in vertices]
+        path.write_text("\n".join(lines + ["f " + " ".join(f"{i + 1}/{i + 1}" for i in p) for p in polygons]) + "\n")
+    else:  # binary PLY, a face property after the list
+        header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(vertices)}\nproperty float x\n"
+                  f"property float y\nproperty float z\nelement face {len(polygons)}\n"
+                  "property list uchar int vertex_indices\nproperty uchar flags\nend_header\n")  # fmt: skip
+        body = vertices.astype("<f4").tobytes()
+        for p in polygons:
+            body += np.uint8(len(p)).tobytes() + np.asarray(p, dtype="<i4").tobytes() + b"\x07"
+        path.write_bytes(header.encode() + body)
+
+
+@pytest.mark.parametrize("kind", ["off", "obj", "ply"])
+def test_polygon_faces_are_cut_into_triangles_that_tile_each_polygon(tmp_path, kind):
+    """Quads, a pentagon and a non-convex hexagon mixed with triangles: the vertices stay as written, each
+    polygon of c corners gives c - 2 triangles in file order, every triangle faces the polygons' way (+z)
+    and together they cover the grid's area exactly (a fan of the L-shaped hexagon would fold over it)."""
+    vertices, polygons = _polygon_grid()
+    path = tmp_path / f"grid.{kind}"
+    _write_polygons(path, vertices, polygons, kind)
+    mesh = hamsa.load_mesh(path)
+    np.testing.assert_allclose(mesh.vertices, vertices)
+    assert mesh.n_faces == sum(len(p) - 2 for p in polygons)
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    normals = np.cross(b - a, c - a)
+    assert np.all(normals[:, 2] > 0)
+    assert np.isclose(normals[:, 2].sum() / 2, 25.0) and np.isclose(mesh.area, 25.0)
+    assert mesh.is_consistently_oriented and mesh.boundary_loops and len(mesh.boundary_loops) == 1
+    owner = np.repeat(np.arange(len(polygons)), [len(p) - 2 for p in polygons])  # triangles in polygon order
+    assert all(set(face) <= set(polygons[o]) for face, o in zip(mesh.faces.tolist(), owner))

@@ -109,3 +109,20 @@ def test_scaled_to_unit_area_centers_and_scales_the_spectrum_by_the_area():
     # Laplacian eigenvalues scale as 1 / length^2 = 1 / area: E(unit) = area * E(mesh)
     original, scaled = hamsa.eigenbasis(mesh, 8).values, hamsa.eigenbasis(unit, 8).values
     np.testing.assert_allclose(scaled[1:], mesh.area * original[1:], rtol=1e-8)
+
+
+def test_triangulate_polygons_cuts_quads_along_the_right_diagonal_and_accepts_three_layouts():
+    from hamsa.mesh import triangulate_polygons
+
+    # a non-planar quad: 0-2 is the shorter diagonal; a dart (non-convex) quad: only 1-3 lies inside it
+    vertices = np.array([[0, 0, 0], [1, 0, 0.5], [0.8, 0.8, 0], [0, 1, 0.5], [3, 0, 0], [5, 0, 0], [3.6, 0.6, 0],
+                         [3, 2, 0]], dtype=float)  # fmt: skip
+    quads = np.array([[0, 1, 2, 3], [5, 6, 7, 4]])
+    faces = triangulate_polygons(vertices, quads)
+    assert faces.tolist() == [[0, 1, 2], [0, 2, 3], [6, 7, 4], [6, 4, 5]]
+    assert faces.tolist() == triangulate_polygons(vertices, [list(q) for q in quads]).tolist()
+    assert faces.tolist() == triangulate_polygons(vertices, quads.ravel(), counts=[4, 4]).tolist()
+    with pytest.raises(MeshError, match="counts sum to 7, but 8 corners"):
+        triangulate_polygons(vertices, quads.ravel(), counts=[4, 3])
+    # triangles pass through unchanged
+    assert triangulate_polygons(vertices, np.array([[0, 1, 2]])).tolist() == [[0, 1, 2]]

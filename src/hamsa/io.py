@@ -3,7 +3,8 @@ and the vertices of OFF / OBJ / PLY), optionally gzip-compressed.
 
 The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
 correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
-unindexed triangles, so identical coordinates are merged in the order they first appear.
+unindexed triangles, so identical coordinates are merged in the order they first appear. Faces with
+more than three corners (OFF, OBJ, PLY) are cut into triangles by :func:`hamsa.mesh.triangulate_polygons`.
 Files are read and written through :mod:`hamsa.files`: only regular files, never more than its read
 limit (gzip included), and every writer goes through a temporary file and an atomic rename, so an
 interrupted write never leaves a half-written mesh behind.
@@ -21,7 +22,7 @@ import numpy as np
 
 from hamsa.errors import FileAccessError, MeshError, RepairWarning
 from hamsa.files import atomic_write, load_array, read_bytes
-from hamsa.mesh import TriMesh
+from hamsa.mesh import TriMesh, triangulate_polygons
 from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 
 FORMATS = ("off", "obj", "ply", "stl")
@@ -326,7 +327,9 @@ def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
 
 def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     _, vertex_lines, face_lines = _off_parts(data)
-    return _fixed_width(vertex_lines, 3, "vertex"), _off_faces(face_lines)
+    vertices = _fixed_width(vertex_lines, 3, "vertex")
+    counts, corners = _off_polygons(face_lines)
+    return vertices, triangulate_polygons(vertices, corners, counts)
 
 
 def _off_parts(data: bytes) -> tuple[str, list[str], list[str]]:
@@ -356,39 +359,34 @@ def _off_parts(data: bytes) -> tuple[str, list[str], list[str]]:
     return header[0], body[:n], body[n : n + m]
 
 
-def _off_faces(face_lines: list[str]) -> np.ndarray:
-    if not face_lines:
-        return np.zeros((0, 3), dtype=np.int64)
+def _off_polygons(face_lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(the corner count (m,), the corners concatenated) of OFF-style face lines ``c i1 .. ic [colour]``."""
     tokens = [line.split() for line in face_lines]
-    counts = np.array([int(t[0]) for t in tokens])
-    bad = np.flatnonzero(counts != 3)
-    if len(bad):
-        raise MeshError(f"face {bad[0]} has {counts[bad[0]]} vertices; hamsa needs a triangle mesh")
-    short = [i for i, t in enumerate(tokens) if len(t) < 4]
+    counts = np.array([int(t[0]) for t in tokens], dtype=np.int64)
+    short = [i for i, t in enumerate(tokens) if len(t) < 1 + max(int(t[0]), 0)]
     if short:
-        raise MeshError(f"face {short[0]} lists fewer than 3 vertex indices")
-    rows = np.array([t[1:4] for t in tokens], dtype=np.float64)
-    return _integer_faces(rows, "face")
+        raise MeshError(f"face {short[0]} lists fewer than its {counts[short[0]]} vertex indices")
+    if np.all(counts == 3):
+        rows = np.array([t[1:4] for t in tokens], dtype=np.float64).reshape(-1, 3)
+    else:
+        rows = np.array([x for t in tokens for x in t[1 : 1 + int(t[0])]], dtype=np.float64).reshape(-1, 1)
+    return counts, _integer_faces(rows, "face").ravel()
 
 
 def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     vertex_lines, face_lines = _obj_lines(data)
     vertices = _fixed_width(vertex_lines, 3, "vertex")
     n = len(vertices)
-    lengths = {len(f) for f in face_lines}
-    if face_lines and lengths != {3}:
-        bad = next(i for i, f in enumerate(face_lines) if len(f) != 3)
-        raise MeshError(f"face {bad} has {len(face_lines[bad])} vertices; hamsa needs a triangle mesh")
     flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
     if flat and max(abs(min(flat)), abs(max(flat))) >= 2**53:
         raise MeshError(f"face index {max(flat, key=abs)} is out of range")
-    faces = np.asarray(flat, dtype=np.int64).reshape(-1, 3)
+    corners = np.asarray(flat, dtype=np.int64)
     # OBJ indices are 1-based; negative indices count back from the current end of the vertex list
     # (here: the whole list, which is exact for files that define all vertices before the faces).
-    faces = np.where(faces > 0, faces - 1, faces + n)
+    corners = np.where(corners > 0, corners - 1, corners + n)
     if np.any(np.asarray(flat) == 0):
         raise MeshError("OBJ face index 0 is invalid (indices are 1-based)")
-    return vertices, faces
+    return vertices, triangulate_polygons(vertices, corners, [len(f) for f in face_lines])
 
 
 def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]]]:
@@ -462,8 +460,14 @@ def _read_ply_tables(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray | N
     if "vertex" not in [e["name"] for e in elements]:
         raise MeshError("PLY needs a 'vertex' element")
     if fmt == "ascii":
-        return _read_ply_ascii(data[body_start:].decode("ascii"), elements)
-    return _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
+        table, polygons = _read_ply_ascii(data[body_start:].decode("ascii"), elements)
+    else:
+        table, polygons = _read_ply_binary(data[body_start:], elements, "<" if fmt == "binary_little_endian" else ">")
+    if polygons is None:
+        return table, None
+    _require_properties(table, "xyz")
+    points = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+    return table, triangulate_polygons(points, polygons[1], polygons[0])
 
 
 def _ply_type(name: str) -> str:
@@ -485,7 +489,8 @@ def _face_list_index(element: dict) -> int:
     raise MeshError("PLY face element lacks a 'vertex_indices' list")
 
 
-def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarray], tuple | None]:
+    """({property name: column} of the vertex element, the faces as :func:`_off_polygons` gives them)."""
     lines = [line for line in text.splitlines() if line.strip()]
     pos = 0
     vertices = faces = None
@@ -506,40 +511,66 @@ def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarr
         elif element["name"] == "face":
             if _face_list_index(element) != 0:
                 raise MeshError("ASCII PLY faces must start with the vertex index list")
-            faces = _off_faces(rows)
+            faces = _off_polygons(rows)
     return vertices, faces
 
 
-def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[dict[str, np.ndarray], tuple | None]:
+    """({property name: column} of the vertex element, the faces as :func:`_ply_binary_polygons` gives them)."""
     pos = 0
     vertices = faces = None
     for element in elements:
         count = element["count"]
         if element["name"] == "face":
-            list_at = _face_list_index(element)
-            fields = []
-            for i, (name, kind, count_type, index_type) in enumerate(element["props"]):
-                if kind == "list":
-                    if i != list_at:
-                        raise MeshError("binary PLY faces with several list properties are not supported")
-                    fields += [("n", order + count_type), ("idx", order + index_type, (3,))]
-                else:
-                    fields.append((name, order + kind))
-            dtype = np.dtype(fields)
-            # Every face must be a triangle for the records to have this fixed size; the counts check it.
-            table = _frombuffer(body, dtype, count, pos, "face")
-            if np.any(table["n"] != 3):
-                raise MeshError("PLY faces must all be triangles")
-            faces = table["idx"].astype(np.int64)
-        else:
-            if any(p[1] == "list" for p in element["props"]):
-                raise MeshError(f"binary PLY element '{element['name']}' with list properties is not supported")
-            dtype = np.dtype([(p[0], order + p[1]) for p in element["props"]])
-            table = _frombuffer(body, dtype, count, pos, element["name"])
-            if element["name"] == "vertex":
-                vertices = {p[0]: table[p[0]] for p in element["props"]}
+            faces, size = _ply_binary_polygons(body, element, order, pos)
+            pos += size
+            continue
+        if any(p[1] == "list" for p in element["props"]):
+            raise MeshError(f"binary PLY element '{element['name']}' with list properties is not supported")
+        dtype = np.dtype([(p[0], order + p[1]) for p in element["props"]])
+        table = _frombuffer(body, dtype, count, pos, element["name"])
+        if element["name"] == "vertex":
+            vertices = {p[0]: table[p[0]] for p in element["props"]}
         pos += dtype.itemsize * count
     return vertices, faces
+
+
+def _ply_binary_polygons(body: bytes, element: dict, order: str, pos: int) -> tuple[tuple, int]:
+    """((corner counts (m,), corners concatenated), bytes read) of a binary PLY face element at ``pos``.
+    Records have one size when every face has as many corners as the first (one read); otherwise they are
+    read one by one."""
+    props, count = element["props"], element["count"]
+    list_at = _face_list_index(element)
+    if any(p[1] == "list" for i, p in enumerate(props) if i != list_at):
+        raise MeshError("binary PLY faces with several list properties are not supported")
+    records: dict[int, np.dtype] = {}
+
+    def record(corners: int) -> np.dtype:
+        if corners not in records:
+            fields = [(p[0], order + p[1]) for p in props[:list_at]]
+            fields += [("n", order + props[list_at][2]), ("idx", order + props[list_at][3], (corners,))]
+            records[corners] = np.dtype(fields + [(p[0], order + p[1]) for p in props[list_at + 1 :]])
+        return records[corners]
+
+    def corners_at(at: int) -> int:
+        return int(_frombuffer(body, record(0), 1, at, "face")["n"][0])
+
+    if count == 0:
+        return (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)), 0
+    first = corners_at(pos)
+    size = record(first).itemsize * count
+    if len(body) >= pos + size:
+        table = np.frombuffer(body, dtype=record(first), count=count, offset=pos)
+        if np.all(table["n"] == first):
+            return (np.full(count, first, dtype=np.int64), table["idx"].astype(np.int64).ravel()), size
+    counts, corners, at = np.empty(count, dtype=np.int64), [], pos
+    for face in range(count):  # polygons of several sizes: records of several lengths
+        counts[face] = corners_at(at)
+        if counts[face] < 0:
+            raise MeshError(f"face {face} has {counts[face]} vertices")
+        corners.append(_frombuffer(body, record(int(counts[face])), 1, at, "face")["idx"].ravel())
+        at += record(int(counts[face])).itemsize
+    return (counts, np.concatenate(corners).astype(np.int64)), at - pos
 
 
 def _frombuffer(body: bytes, dtype: np.dtype, count: int, pos: int, what: str) -> np.ndarray:

@@ -500,3 +500,146 @@ def _non_manifold_vertices(faces: np.ndarray, n: int) -> np.ndarray:
     fans_per_vertex = np.unique(np.stack([corner_vertex, fan[corner_id]], axis=1), axis=0)[:, 0]
     counts = np.bincount(fans_per_vertex, minlength=n)
     return np.flatnonzero(counts > 1)
+
+
+def triangulate_polygons(vertices, polygons, counts=None) -> np.ndarray:
+    """The (t, 3) int64 triangles of polygonal faces, each polygon's triangles consecutive and in the polygons'
+    order; vertex ids do not change. Triangles stay triangles; a quad is cut along the diagonal whose two
+    triangles both face the quad's way (its Newell normal), the shorter one when both do; a larger polygon is
+    a fan from its first corner when every fan triangle faces the polygon's way (a convex polygon), and is
+    cut into ears otherwise, in the plane of its Newell normal.
+
+    Parameters
+    ----------
+    vertices : (n, 3) coordinates
+    polygons : (m, c) integer array of c-gons, a sequence of m index sequences (mixed sizes), or with
+        ``counts`` the corners of all polygons concatenated
+    counts : (m,) the number of corners of each polygon, when ``polygons`` is flat
+
+    Raises
+    ------
+    MeshError
+        For a polygon with fewer than 3 corners, an index outside 0..n-1, or a polygon that crosses itself
+        (no ear can be cut).
+    """
+    vertices = as_coordinates(vertices)
+    if counts is not None:
+        counts, flat = np.asarray(counts, dtype=np.int64), np.asarray(polygons)
+        if flat.ndim != 1 or counts.ndim != 1 or counts.sum() != len(flat):
+            raise MeshError(f"counts sum to {counts.sum()}, but {flat.size} corners are given")
+    elif isinstance(polygons, np.ndarray) and polygons.ndim == 2:
+        counts, flat = np.full(len(polygons), polygons.shape[1]), polygons.ravel()
+    else:
+        polygons = [np.asarray(p).ravel() for p in polygons]
+        counts = np.array([len(p) for p in polygons], dtype=np.int64)
+        flat = np.concatenate(polygons) if polygons else np.zeros(0, dtype=np.int64)
+    if len(counts) and counts.min() < 3:
+        bad = int(np.argmax(counts < 3))
+        raise MeshError(f"face {bad} has {counts[bad]} vertices; a face needs at least 3")
+    if flat.size and (not np.issubdtype(flat.dtype, np.integer) and np.any(flat != np.round(flat))):
+        raise MeshError("face indices must be integers")
+    flat = flat.astype(np.int64)
+    if np.all(counts == 3):
+        return flat.reshape(-1, 3)
+    n = len(vertices)
+    if flat.size and (flat.min() < 0 or flat.max() >= n):
+        corner = int(np.argmax((flat < 0) | (flat >= n)))
+        face = int(np.searchsorted(np.cumsum(counts), corner, side="right"))
+        raise MeshError(f"face {face} references vertex {flat[corner]}, mesh has {n} vertices")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    pieces, owners = [], []
+    for size in np.unique(counts):
+        chosen = np.flatnonzero(counts == size)
+        corners = flat[starts[chosen, None] + np.arange(size)]  # (p, size)
+        points = vertices[corners]
+        normal = _newell_normals(points)
+        if size == 3:
+            triangles = corners[:, None, :]
+        elif size == 4:
+            first = corners[:, [[0, 1, 2], [0, 2, 3]]]
+            second = corners[:, [[1, 2, 3], [1, 3, 0]]]
+            fits_first, fits_second = (_faces_along(vertices, t, normal) for t in (first, second))
+            shorter_first = np.linalg.norm(points[:, 0] - points[:, 2], axis=1) <= np.linalg.norm(
+                points[:, 1] - points[:, 3], axis=1
+            )
+            use_first = fits_first & (~fits_second | shorter_first) | ~fits_first & ~fits_second & shorter_first
+            triangles = np.where(use_first[:, None, None], first, second)
+        else:
+            fan = np.stack([np.repeat(corners[:, :1], size - 2, axis=1), corners[:, 1:-1], corners[:, 2:]], axis=2)
+            convex = _faces_along(vertices, fan, normal)
+            triangles = fan
+            for row in np.flatnonzero(~convex & np.any(normal != 0, axis=1)):  # (a flat polygon keeps its fan)
+                triangles[row] = _ears(points[row], normal[row], corners[row], int(chosen[row]))
+        pieces.append(triangles.reshape(-1, 3))
+        owners.append(np.repeat(chosen, triangles.shape[1]))
+    order = np.argsort(np.concatenate(owners), kind="stable")
+    return np.concatenate(pieces)[order]
+
+
+def _newell_normals(points: np.ndarray) -> np.ndarray:
+    """(p, 3) Newell normals (twice the vector area) of p polygons given as (p, c, 3) corners."""
+    following = np.roll(points, -1, axis=1)
+    return np.cross(points, following).sum(axis=1)
+
+
+def _faces_along(vertices: np.ndarray, triangles: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(p,) whether every triangle of (p, t, 3) has a positive area along its polygon's normal (p, 3)."""
+    a, b, c = (vertices[triangles[..., i]] for i in range(3))
+    return np.all(np.einsum("ptj,pj->pt", np.cross(b - a, c - a), normal) > 0, axis=1)
+
+
+def _ears(points: np.ndarray, normal: np.ndarray, corners: np.ndarray, face: int) -> np.ndarray:
+    """The (c - 2, 3) triangles of one non-convex polygon by ear cutting in the plane normal to ``normal``."""
+    u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal / np.linalg.norm(normal), u)
+    plane = np.stack([points @ u, points @ v], axis=1)  # counter-clockwise seen along the normal
+    if _crosses_itself(plane):
+        raise MeshError(f"face {face} is a polygon that crosses itself: it cannot be cut into triangles")
+    left = list(range(len(points)))
+    triangles = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    while len(left) > 3:
+        for position, i in enumerate(left):
+            before, after = left[position - 1], left[(position + 1) % len(left)]
+            o, a, b = plane[before], plane[i], plane[after]
+            if cross(o, a, b) <= 0:
+                continue  # a reflex corner (or a straight one): not an ear
+            inside = [
+                j
+                for j in left
+                if j not in (before, i, after)
+                and cross(o, a, plane[j]) >= 0
+                and cross(a, b, plane[j]) >= 0
+                and cross(b, o, plane[j]) >= 0
+            ]
+            if not inside:
+                triangles.append((corners[before], corners[i], corners[after]))
+                left.pop(position)
+                break
+        else:
+            raise MeshError(f"face {face} is a polygon that crosses itself: it cannot be cut into triangles")
+    triangles.append(tuple(corners[left]))
+    return np.array(triangles, dtype=np.int64)
+
+
+def _crosses_itself(plane: np.ndarray) -> bool:
+    """Whether two edges of a closed polygon (c, 2) that share no corner cross (properly, in the plane)."""
+    a, b = plane, np.roll(plane, -1, axis=0)
+    c = len(plane)
+
+    def side(o, p, q):  # sign of (p - o) x (q - o), broadcast over edge pairs
+        return np.sign(
+            (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+        )
+
+    i, j = np.triu_indices(c, k=2)
+    keep = (j - i) % c != c - 1  # the last edge shares a corner with the first
+    i, j = i[keep], j[keep]
+    proper = (side(a[i], b[i], a[j]) * side(a[i], b[i], b[j]) < 0) & (
+        side(a[j], b[j], a[i]) * side(a[j], b[j], b[i]) < 0
+    )
+    return bool(np.any(proper))
