@@ -616,3 +616,79 @@ def test_mean_curvature_and_area_distortion_potentials_on_a_cloud_follow_the_mes
     assert distortion.min() >= 1 and np.corrcoef(distortion, potentials.area_distortion(rest, walk))[0, 1] > 0.5
     spots = potentials.dalmatian_texture(cloud, spots=10)
     assert spots.shape == (cloud.n_vertices, 3) and 0.05 < np.mean(spots[:, 0] < 0.5) < 0.5
+
+
+def _thin_shell():
+    """A unit sphere flattened to an ellipsoid 0.08 thick (about two point spacings), its exact outward unit
+    normals and its mesh's low nonzero eigenvalues."""
+    sphere = hamsa.shapes.icosphere(4)
+    points = sphere.vertices * [1.0, 1.0, 0.04]
+    normals = points / [1.0, 1.0, 0.04**2]
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    return points, normals, hamsa.eigenbasis(hamsa.TriMesh(points, sphere.faces), 8).values[1:]
+
+
+def test_given_normals_keep_the_two_sides_of_a_thin_shell_apart():
+    """Estimated normals join the two sides of a shell two spacings thick (the cloud's low eigenvalues 40% off
+    the mesh's); the exact normals keep them apart, given outward, inward or with random signs (these are
+    re-oriented), and a subset or a rescaled copy keeps them."""
+    points, normals, reference = _thin_shell()
+    assert np.abs(hamsa.eigenbasis(hamsa.PointCloud(points), 8).values[1:] / reference - 1).max() > 0.2
+    signs = np.where(np.random.default_rng(0).random(len(points)) < 0.5, -1.0, 1.0)[:, None]
+    for given, origin in ((normals, "given"), (-normals, "given"), (2 * signs * normals, "given, re-oriented")):
+        cloud = hamsa.PointCloud(points, normals=given)
+        assert cloud.normals_origin == origin
+        np.testing.assert_allclose(cloud.normals, normals, atol=1e-12)  # unit, outward
+        assert np.abs(hamsa.eigenbasis(cloud, 8).values[1:] / reference - 1).max() < 0.04
+    cloud = hamsa.PointCloud(points, normals=normals)
+    np.testing.assert_allclose(cloud.subset(np.arange(0, len(points), 2)).normals, normals[::2])
+    np.testing.assert_allclose(cloud.scaled_to_unit_area().normals, normals)
+    with pytest.raises(MeshError, match=r"normals have shape \(10, 3\), expected \(2562, 3\)"):
+        hamsa.PointCloud(points, normals=normals[:10])
+    with pytest.raises(MeshError, match="1 normals are zero or not finite"):
+        hamsa.PointCloud(points, normals=np.vstack([normals[:-1], [0.0, 0.0, 0.0]]))
+
+
+def test_point_files_with_normals_give_them_to_the_cloud(tmp_path, capsys):
+    """Normals are read from PLY (nx ny nz; normal_x ... in binary), NOFF, OBJ vn lines as many as the vertices,
+    and XYZ columns 4-6 when they are unit vectors; XYZ colours, OBJ per-corner normals and .npy give none.
+    The cloud takes them unless file_normals=False / --estimate-normals; hamsa info says which."""
+    from hamsa.cli import main
+    from hamsa.io import read_vertex_normals
+
+    points, normals, _ = _thin_shell()
+    n = len(points)
+    rows = np.hstack([points, normals])
+    files = {
+        "a.ply": "ply\nformat ascii 1.0\nelement vertex %d\n" % n
+        + "".join(f"property double {c}\n" for c in ("x", "y", "z", "nx", "ny", "nz"))
+        + "end_header\n"
+        + "\n".join(" ".join(f"{x:.17g}" for x in row) for row in rows),
+        "a.off": "NOFF\n%d 0 0\n" % n + "\n".join(" ".join(f"{x:.17g}" for x in row) for row in rows),
+        "a.obj": "\n".join(f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in points)
+        + "\n"
+        + "\n".join(f"vn {x:.17g} {y:.17g} {z:.17g}" for x, y, z in normals),
+        "a.xyz": "\n".join(" ".join(f"{x:.17g}" for x in row) for row in rows),
+    }
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n"
+              + "".join(f"property float {c}\n" for c in ("x", "y", "z", "normal_x", "normal_y", "normal_z"))
+              + "end_header\n")  # fmt: skip
+    (tmp_path / "b.ply").write_bytes(header.encode() + rows.astype("<f4").tobytes())
+    for name in (*files, "b.ply"):
+        np.testing.assert_allclose(read_vertex_normals(tmp_path / name), normals, atol=1e-6, err_msg=name)
+        assert hamsa.load_point_cloud(tmp_path / name).normals_origin == "given"
+        assert hamsa.io.load_shape(tmp_path / name, file_normals=False).normals_origin == "estimated"
+    (tmp_path / "rgb.xyz").write_text("\n".join(f"{x:.17g} {y:.17g} {z:.17g} 200 10 30" for x, y, z in points))
+    (tmp_path / "corner.obj").write_text(files["a.obj"] + "\nvn 0 0 1\n")
+    np.save(tmp_path / "a.npy", rows)
+    for name in ("rgb.xyz", "corner.obj", "a.npy"):
+        assert read_vertex_normals(tmp_path / name) is None, name
+    assert main(["info", str(tmp_path / "a.ply")]) == 0
+    assert "normals         from the file" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "a.ply"), "--estimate-normals"]) == 0
+    assert "normals         estimated" in capsys.readouterr().out
+    hamsa.save_mesh(hamsa.shapes.icosphere(1), tmp_path / "mesh.off")
+    assert main(["info", str(tmp_path / "mesh.off"), "--estimate-normals"]) == 2
+    assert "--estimate-normals: for point clouds" in capsys.readouterr().err

@@ -115,21 +115,39 @@ def _add_cloud_options(command) -> None:
         help="also leave out the neighbours this many local spacings off a point's smooth sheet, whatever the "
         "normals say (e.g. 0.7: parts touching over a wide area, such as hands on thighs; default: off)",
     )
+    group.add_argument(
+        "--estimate-normals",
+        action="store_true",
+        help="estimate the normals even when the point file holds some (PLY nx ny nz, NOFF, OBJ vn, XYZ columns "
+        "4-6 of unit length; by default those are used, their signs trusted)",
+    )
 
 
 def _cloud_options(args) -> dict:
-    """The PointCloud keywords of ``args`` (of :func:`_add_cloud_options`)."""
+    """The point-cloud keywords of :func:`hamsa.io.load_shape` in ``args`` (of :func:`_add_cloud_options`)."""
     from hamsa.pointcloud import DEFAULT_NEIGHBORS
 
     return {
         "neighbors": args.neighbors or DEFAULT_NEIGHBORS,
         "separate_sheets": not args.joined_sheets,
         "off_sheet": args.off_sheet,
+        "file_normals": not args.estimate_normals,
     }
 
 
+def _repaired_cloud(path: str, points: np.ndarray, cloud: dict, keep: str = "all"):
+    """:func:`hamsa.repair.repair_point_cloud` of a point file's points with the :func:`_cloud_options`
+    ``cloud`` (the file's normals unless --estimate-normals)."""
+    from hamsa.io import read_vertex_normals
+    from hamsa.repair import repair_point_cloud
+
+    options = dict(cloud)
+    normals = read_vertex_normals(path) if options.pop("file_normals") else None
+    return repair_point_cloud(points, keep=keep, normals=normals, **options)
+
+
 def _check_cloud_options(args, *shapes) -> None:
-    """Refuses --neighbors / --joined-sheets / --off-sheet when none of the loaded shapes is a point cloud, and
+    """Refuses the point-cloud options (--neighbors, --off-sheet, ...) when no loaded shape is a point cloud, and
     --off-sheet with --joined-sheets (nothing is left out then)."""
     from hamsa.pointcloud import PointCloud
 
@@ -137,6 +155,7 @@ def _check_cloud_options(args, *shapes) -> None:
         ("--neighbors", args.neighbors),
         ("--joined-sheets", args.joined_sheets),
         ("--off-sheet", args.off_sheet),
+        ("--estimate-normals", args.estimate_normals),
     )
     given = [name for name, value in options if value is not None and value is not False]
     if args.joined_sheets and args.off_sheet is not None:
@@ -158,11 +177,11 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
 
     if repair:
         from hamsa.io import read_shape_arrays
-        from hamsa.repair import repair_mesh, repair_point_cloud
+        from hamsa.repair import repair_mesh
 
         vertices, faces = read_shape_arrays(path)
         if faces is None:
-            shape, kept, report = repair_point_cloud(vertices, keep="largest", **(cloud or {}))
+            shape, kept, report = _repaired_cloud(path, vertices, cloud or {"file_normals": True}, keep="largest")
         else:
             shape, kept, report = repair_mesh(vertices, faces, keep="largest")
         if not report.changed:
@@ -609,7 +628,6 @@ def _info(args) -> None:
     from hamsa.io import load_shape, read_shape_arrays
     from hamsa.mesh import format_ids
     from hamsa.pointcloud import STRAY_JUMP, PointCloud
-    from hamsa.repair import repair_point_cloud
 
     dropped = ""
     try:
@@ -619,7 +637,7 @@ def _info(args) -> None:
         if faces is not None:
             raise
         try:
-            mesh, _, report = repair_point_cloud(points, **_cloud_options(args))
+            mesh, _, report = _repaired_cloud(args.mesh, points, _cloud_options(args))
         except MeshError:
             raise error from None
         dropped = f" of {len(points)} in the file; the lines below leave out {str(report).removeprefix('repaired: ')}"
@@ -632,6 +650,7 @@ def _info(args) -> None:
         print(f"area            {cloud.area:.6g} (the point-cloud Laplacian's mass, {cloud.neighbors} neighbours)")
         print(f"bounding box    diagonal {cloud.bounding_box_diagonal:.6g}")
         print(f"mean spacing    {cloud.mean_spacing:.6g}")
+        print(f"normals         {cloud.normals_origin.replace('given', 'from the file')}")
         print(f"components      {cloud.n_components}")
         stray = cloud.stray_points
         print(

@@ -58,18 +58,23 @@ def load_shape(
     neighbors: int = DEFAULT_NEIGHBORS,
     separate_sheets: bool = True,
     off_sheet: float | None = None,
+    file_normals: bool = True,
 ) -> TriMesh | PointCloud:
     """The file as a :class:`TriMesh`, or as a :class:`~hamsa.pointcloud.PointCloud` when it holds points without
-    faces (``.xyz`` / ``.pts`` / ``.txt`` / ``.npy``, or an OFF / OBJ / PLY whose face count is zero), read once.
+    faces (``.xyz`` / ``.pts`` / ``.txt`` / ``.npy``, or an OFF / OBJ / PLY whose face count is zero).
 
     ``manifold`` as in :func:`load_mesh`, ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
-    :class:`~hamsa.pointcloud.PointCloud` (a mesh ignores them). Raises
+    :class:`~hamsa.pointcloud.PointCloud` (a mesh ignores them); a cloud takes the normals the file holds
+    (:func:`read_vertex_normals`) unless ``file_normals=False``, which estimates them. Raises
     MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
     """
     vertices, faces = read_shape_arrays(path)
     try:
         if faces is None:
-            return PointCloud(vertices, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet)
+            normals = read_vertex_normals(path) if file_normals else None
+            return PointCloud(
+                vertices, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet, normals=normals
+            )
         return TriMesh(vertices, faces, manifold=manifold)
     except MeshError as exc:
         raise _naming(path, exc) from None
@@ -92,20 +97,23 @@ def load_point_cloud(
     separate_sheets: bool = True,
     off_sheet: float | None = None,
     repair: bool = False,
+    file_normals: bool = True,
 ) -> PointCloud:
     """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
     or commas; further columns such as normals or colours are ignored), ``.npy`` ((n, 3) or wider), or the
     vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
 
     Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
-    :class:`~hamsa.pointcloud.PointCloud`. ``repair=True`` drops non-finite, repeated and stray points
-    (:func:`hamsa.repair.repair_point_cloud`; use it directly for the index map) with a
+    :class:`~hamsa.pointcloud.PointCloud`. The normals the file holds (:func:`read_vertex_normals`) are the
+    cloud's unless ``file_normals=False``, which estimates them. ``repair=True`` drops non-finite, repeated
+    and stray points (:func:`hamsa.repair.repair_point_cloud`; use it directly for the index map) with a
     :class:`~hamsa.errors.RepairWarning` saying what it dropped. Raises MeshError naming the file if it cannot
     be read or parsed, or if the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few,
     NaN, repeated).
     """
     points = read_point_array(path)
     options = {"neighbors": neighbors, "separate_sheets": separate_sheets, "off_sheet": off_sheet}
+    options["normals"] = read_vertex_normals(path) if file_normals else None
     try:
         if not repair:
             return PointCloud(points, **options)
@@ -202,6 +210,59 @@ def load_mesh(path: str | os.PathLike, repair: bool = False, *, manifold: bool =
 _PLY_COLOURS = (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
 
 
+def read_vertex_normals(path: str | os.PathLike) -> np.ndarray | None:
+    """The per-vertex normals a mesh or point file holds, (n, 3) float64 as written, one row per vertex in file
+    order, or None when it holds none (for :class:`~hamsa.pointcloud.PointCloud`'s ``normals=``).
+
+    Read from a PLY vertex element's ``nx ny nz`` (or ``normal_x normal_y normal_z``) properties, an ``NOFF`` /
+    ``CNOFF`` file's vertex lines, OBJ ``vn`` lines when there are as many as ``v`` lines (fewer or more are
+    per-corner normals that the faces index: None), or the fourth to sixth columns of an ``.xyz`` / ``.pts``
+    / ``.txt`` file when they are unit vectors on every line (``x y z nx ny nz``; other columns, such as
+    ``x y z r g b``, are not normals). ``.npy`` files hold none. ``.gz`` too. Raises MeshError naming the
+    file if it cannot be read or parsed.
+    """
+    fmt, gzipped = _suffix(path)
+    if fmt not in ("ply", "off", "obj", "xyz", "pts", "txt"):
+        return None
+    try:
+        data = read_bytes(path, decompress="gzip" if gzipped else None)
+        reader = {"ply": _ply_normals, "off": _off_normals, "obj": _obj_normals}.get(fmt, _text_normals)
+        return reader(data)
+    except FileAccessError as exc:
+        raise MeshError(str(exc)) from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise _naming(path, MeshError(str(exc))) from None
+    except MeshError as exc:
+        raise _naming(path, exc) from None
+
+
+_PLY_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
+
+
+def _ply_normals(data: bytes) -> np.ndarray | None:
+    table, _ = _read_ply_tables(data)
+    names = next((names for names in _PLY_NORMALS if all(name in table for name in names)), None)
+    return None if names is None else np.stack([table[name].astype(np.float64) for name in names], axis=1)
+
+
+def _off_normals(data: bytes) -> np.ndarray | None:
+    variant, vertex_lines, _ = _off_parts(data)
+    return _fixed_width(vertex_lines, 6, "vertex")[:, 3:] if variant.endswith("NOFF") else None
+
+
+def _obj_normals(data: bytes) -> np.ndarray | None:
+    vertex_lines, _, normal_lines = _obj_lines(data)
+    return _fixed_width(normal_lines, 3, "normal") if len(normal_lines) == len(vertex_lines) else None
+
+
+def _text_normals(data: bytes) -> np.ndarray | None:
+    lines = [line.replace(",", " ") for line in _data_lines(data.decode("utf-8"))]
+    if not lines or min(len(line.split()) for line in lines) < 6:
+        return None
+    columns = _fixed_width(lines, 6, "point")[:, 3:]
+    return columns if np.all(np.abs(np.linalg.norm(columns, axis=1) - 1) < 1e-3) else None
+
+
 def read_vertex_colors(path: str | os.PathLike) -> np.ndarray:
     """The per-vertex colours of a mesh or point file, (n, 3) float64 RGB in [0, 1], one row per vertex in file
     order (for :func:`hamsa.potentials.from_vertex_colors`, the texture potential).
@@ -245,7 +306,7 @@ def _off_colours(data: bytes) -> np.ndarray:
 
 
 def _obj_colours(data: bytes) -> np.ndarray:
-    vertex_lines, _ = _obj_lines(data)
+    vertex_lines, _, _ = _obj_lines(data)
     if min(len(line.split()) for line in vertex_lines) < 6:
         raise MeshError("the OBJ vertex lines have no colours ('v x y z r g b')")
     return _byte_or_unit(_fixed_width(vertex_lines, 6, "vertex")[:, 3:])
@@ -374,7 +435,7 @@ def _off_polygons(face_lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    vertex_lines, face_lines = _obj_lines(data)
+    vertex_lines, face_lines, _ = _obj_lines(data)
     vertices = _fixed_width(vertex_lines, 3, "vertex")
     n = len(vertices)
     flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
@@ -389,18 +450,21 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return vertices, triangulate_polygons(vertices, corners, [len(f) for f in face_lines])
 
 
-def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]]]:
-    """(the text after 'v ' of each vertex line, the tokens after 'f ' of each face line) of an OBJ file."""
-    vertex_lines, face_lines = [], []
+def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]], list[str]]:
+    """(the text after 'v ' of each vertex line, the tokens after 'f ' of each face line, the text after 'vn '
+    of each normal line) of an OBJ file."""
+    vertex_lines, face_lines, normal_lines = [], [], []
     for raw in data.decode("utf-8").splitlines():
         line = raw.split("#", 1)[0].strip()
         if line.startswith("v "):
             vertex_lines.append(line[2:])
         elif line.startswith("f "):
             face_lines.append(line[2:].split())
+        elif line.startswith("vn "):
+            normal_lines.append(line[3:])
     if not vertex_lines:
         raise MeshError("no vertices ('v x y z' lines)")
-    return vertex_lines, face_lines
+    return vertex_lines, face_lines, normal_lines
 
 
 # ------------------------------------------------------------------------------------- PLY

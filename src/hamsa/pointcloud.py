@@ -42,6 +42,7 @@ DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & 
 # nearest points of the least-squares gradient and of the normals' orientation graph
 GRADIENT_NEIGHBORS = 10
 _NORMAL_ROUNDS = 2  # rounds of re-estimating the normals from the local triangulation's stars
+_CONSISTENT_SIGNS = 0.9  # given normals keep their signs when this share agrees with hamsa's orientation
 _REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
 _FIT_ROUNDS = 8  # reweighting rounds of the robust quadratic fit of a point's sheet (``off_sheet``)
 STRAY_NEIGHBORS = 8  # nearest points linked in the stray-point test; larger groups are parts of the cloud
@@ -68,14 +69,20 @@ class PointCloud:
         the point's smooth sheet (:attr:`sheet_offsets`), whatever the normals' signs: it separates parts
         that touch over a wide area, where the normals' orientation fails. None (default): the normals
         alone decide. 0.7 is the measured choice (docs/results/point_clouds.md).
+    normals : array_like, shape (n, 3), optional
+        Normals that come with the points (a scanner's, a mesh's), used as :attr:`normals` instead of
+        estimated ones (rescaled to unit length). Their signs are kept when they are consistent -- on at least
+        90% of the points the same as the orientation hamsa gives their directions, or all reversed
+        (inward: then all are flipped) -- and their directions oriented as estimated ones are otherwise
+        (unoriented normals); :attr:`normals_origin` says which. None (default): estimated.
 
     Raises
     ------
     MeshError
         If the array is not real (n, 3), has non-finite or huge coordinates, has no more than ``neighbors``
         points or repeats a point (two samples at one place have no tangent-plane triangulation between
-        them; remove duplicates first), or if ``off_sheet`` is not a positive number or comes with
-        ``separate_sheets=False``.
+        them; remove duplicates first), if ``off_sheet`` is not a positive number or comes with
+        ``separate_sheets=False``, or if ``normals`` is not (n, 3) or has a non-finite or zero row.
 
     Warns
     -----
@@ -99,9 +106,11 @@ class PointCloud:
         mollify: float = 1e-5,
         separate_sheets: bool = True,
         off_sheet: float | None = None,
+        normals=None,
     ):
         points = as_coordinates(points, "points")
         check_coordinates(points, "points")
+        self._given_normals = None if normals is None else _unit_normals(normals, len(points))
         if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
             raise MeshError(f"neighbors must be an integer >= 3, got {neighbors!r}")
         if off_sheet is not None and not (isinstance(off_sheet, (int, float, np.number)) and 0 < off_sheet < np.inf):
@@ -154,10 +163,33 @@ class PointCloud:
     def n_vertices(self) -> int:
         return self._points.shape[0]
 
+    @property
+    def normals_origin(self) -> str:
+        """Where :attr:`normals` come from: ``"estimated"``, ``"given"`` (the constructor's, their signs kept or
+        all flipped outward) or ``"given, re-oriented"`` (their directions, signs made consistent by hamsa)."""
+        return "estimated" if self._given_normals is None else self._given_oriented[1]
+
+    @cached_property
+    def _given_oriented(self) -> tuple[np.ndarray, str]:
+        """(the given normals as :attr:`normals` uses them, :attr:`normals_origin`)."""
+        distances, indices = self._neighbourhoods
+        given = self._given_normals
+        oriented = _oriented(self._points, given, distances, indices)
+        agreement = np.mean(np.einsum("ij,ij->i", given, oriented) > 0)
+        if agreement >= _CONSISTENT_SIGNS:
+            return given, "given"
+        if agreement <= 1 - _CONSISTENT_SIGNS:
+            flipped = -given
+            flipped.flags.writeable = False
+            return flipped, "given"
+        oriented.flags.writeable = False
+        return oriented, "given, re-oriented"
+
     def __repr__(self) -> str:
         return (
             f"PointCloud(n_points={self.n_vertices}, neighbors={self.neighbors}, "
-            f"separate_sheets={self.separate_sheets}, off_sheet={self.off_sheet})"
+            f"separate_sheets={self.separate_sheets}, off_sheet={self.off_sheet}"
+            + (")" if self._given_normals is None else f", normals {self.normals_origin})")
         )
 
     @cached_property
@@ -362,7 +394,10 @@ class PointCloud:
         mesh's vertex normal averages its faces) and the signs are oriented again, which the better
         directions make clearer. Where parts are thinner than the point spacing or touch over a wide area
         some points can still get the wrong sign, mostly in patches on legs, tails, ears and at the
-        contacts, and where a star still joins two sheets its normal tilts toward the other one."""
+        contacts, and where a star still joins two sheets its normal tilts toward the other one.
+        Normals given to the constructor are used instead, oriented as the constructor says."""
+        if self._given_normals is not None:
+            return self._given_oriented[0]
         distances, indices = self._neighbourhoods
         n = self.n_vertices
         fitted = 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)  # the point and its nearest ones
@@ -408,7 +443,7 @@ class PointCloud:
     def scaled_to_unit_area(self) -> PointCloud:
         """This cloud centered at its mean and scaled so that :attr:`area` is 1 (same neighbourhoods)."""
         centered = (self._points - self._points.mean(axis=0)) / np.sqrt(self.area)
-        return self._with_points(centered)
+        return self._with_points(centered, self._given_normals)
 
     def subset(self, indices) -> PointCloud:
         """The cloud of the points ``indices`` (in that order): e.g. a random subsample."""
@@ -417,16 +452,33 @@ class PointCloud:
             raise MeshError(f"indices must be a 1-D integer array, got shape {indices.shape} {indices.dtype}")
         if indices.size and (indices.min() < 0 or indices.max() >= self.n_vertices):
             raise MeshError(f"indices must be in [0, {self.n_vertices})")
-        return self._with_points(self._points[indices])
+        return self._with_points(
+            self._points[indices], None if self._given_normals is None else self._given_normals[indices]
+        )
 
-    def _with_points(self, points) -> PointCloud:
+    def _with_points(self, points, normals) -> PointCloud:
         return PointCloud(
             points,
             neighbors=self.neighbors,
             mollify=self.mollify,
             separate_sheets=self.separate_sheets,
             off_sheet=self.off_sheet,
+            normals=normals,
         )
+
+
+def _unit_normals(normals, n: int) -> np.ndarray:
+    """Given normals as a read-only (n, 3) float64 array of unit rows; MeshError naming what is wrong."""
+    normals = np.array(normals, dtype=np.float64)
+    if normals.shape != (n, 3):
+        raise MeshError(f"normals have shape {normals.shape}, expected ({n}, 3): one per point")
+    length = np.linalg.norm(normals, axis=1)
+    bad = np.flatnonzero(~(np.isfinite(length) & (length > 0)))
+    if len(bad):
+        raise MeshError(f"{len(bad)} normals are zero or not finite ({format_ids(bad)})")
+    normals /= length[:, None]
+    normals.flags.writeable = False
+    return normals
 
 
 def stray_points(points, nearest: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:

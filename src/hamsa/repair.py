@@ -130,7 +130,8 @@ def repair_point_cloud(
     ----------
     points : (n, 3) array
     keep : "all" pieces, or "largest" (by the operator's mass; building the operators twice when it drops any)
-    **cloud_options : the keywords of :class:`~hamsa.pointcloud.PointCloud` (``neighbors``, ...)
+    **cloud_options : the keywords of :class:`~hamsa.pointcloud.PointCloud` (``neighbors``, ...); given
+        ``normals`` (n, 3) are those of the input points, and the cloud keeps the rows of the points it keeps
 
     Returns
     -------
@@ -142,6 +143,13 @@ def repair_point_cloud(
     if keep not in ("all", "largest"):
         raise MeshError(f"keep must be 'all' or 'largest', got {keep!r}")
     points = as_coordinates(points, "points")
+    normals = cloud_options.pop("normals", None)
+    if normals is not None and np.shape(normals) != points.shape:
+        raise MeshError(f"normals have shape {np.shape(normals)}, expected {points.shape}: one per point")
+
+    def cloud_of(rows):
+        return PointCloud(points[rows], normals=None if normals is None else np.asarray(normals)[rows], **cloud_options)
+
     kept = np.flatnonzero(np.isfinite(points).all(axis=1))
     counts = {"non_finite_points": len(points) - len(kept)}
     _, first = np.unique(points[kept], axis=0, return_index=True)
@@ -149,18 +157,18 @@ def repair_point_cloud(
     kept = kept[np.sort(first)]
     with warnings.catch_warnings():  # the cloud's own stray-point warning: those points are dropped here
         warnings.simplefilter("ignore", InputWarning)
-        cloud = PointCloud(points[kept], **cloud_options)
+        cloud = cloud_of(kept)
     stray = cloud.stray_points
     counts["stray_points"] = len(stray)
     if len(stray):
         kept = np.delete(kept, stray)
-        cloud = PointCloud(points[kept], **cloud_options)
+        cloud = cloud_of(kept)
     count, labels = cloud.vertex_components if keep == "largest" else (1, None)
     counts["dropped_pieces"] = count - 1
     if counts["dropped_pieces"]:
         largest = np.argmax(np.bincount(labels, weights=cloud.operators[1].diagonal()))
         kept = kept[labels == largest]
-        cloud = PointCloud(points[kept], **cloud_options)
+        cloud = cloud_of(kept)
     return cloud, kept, PointCloudRepairReport(**counts)
 
 
