@@ -21,7 +21,8 @@ on clouds the Hamiltonian is at least as good as the LBO for every method, and w
 within 0.05) of the same method on the mesh (the LBO's own gaps to the mesh are listed, not counted).
 
     OMP_NUM_THREADS=1 python benchmarks/point_clouds.py [--scape 5] [--scape-skip 0] [--tosca-classes centaur horse]
-        [--jobs 2] [--methods hks] [--representations cloud] [--joined-sheets | --off-sheet 0.7] [-o point_clouds.json]
+        [--jobs 2] [--methods hks] [--representations cloud] [--joined-sheets | --off-sheet 0.7] [--mesh-normals]
+        [-o point_clouds.json]
     python benchmarks/point_clouds.py --spectra SHAPE...          # cloud spectra against the meshes
     python benchmarks/point_clouds.py --signs SOURCE:TARGET...    # wrong signs of the matching potential
     python benchmarks/point_clouds.py --build 50000 200000         # the operators' cost against robust_laplacian
@@ -44,6 +45,7 @@ import hamsa
 from hamsa.datasets import load_scape, load_tosca
 from hamsa.files import atomic_write
 from hamsa.paper.benchmark import dataset_pairs, evaluate_pair, identity_truth
+from hamsa.repair import orient_faces
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 METHODS = ("hks", "fmap", "icskm")
@@ -69,28 +71,27 @@ def pair_scores(
     orientation: float = 0.0,
     cloud_options: dict | None = None,
     representations=REPRESENTATIONS,
+    mesh_normals: bool = False,
 ) -> list[dict]:
     """Rows {dataset, pair, representation, method, basis, auc, within_0.05} of one pair, for the
     ``representations`` named; ``cloud_options``: keywords of :class:`hamsa.PointCloud` (``separate_sheets``,
-    ``off_sheet``)."""
+    ``off_sheet``); ``mesh_normals``: the clouds take their meshes' vertex normals (faces oriented
+    consistently first), as a scanner's."""
     source, target, truth = unit_area_pair(dataset, source_name, target_name)
     rng = np.random.default_rng(0)
     half_s = np.sort(rng.choice(source.n_vertices, source.n_vertices // 2, replace=False))
     half_t = np.sort(rng.choice(target.n_vertices, target.n_vertices // 2, replace=False))
     known = truth[half_s] >= 0
 
-    def cloud(points):
-        return hamsa.PointCloud(points, **(cloud_options or {}))
+    def cloud(mesh, rows=slice(None)):
+        normals = orient_faces(mesh).vertex_normals[rows] if mesh_normals else None
+        return hamsa.PointCloud(mesh.vertices[rows], normals=normals, **(cloud_options or {}))
 
     nearest = cKDTree(target.vertices[half_t]).query(target.vertices[np.where(known, truth[half_s], 0)])[1]
     shapes = {
         "mesh": (source, target, truth),
-        "cloud": (cloud(source.vertices), cloud(target.vertices), truth),
-        "cloud 50%": (
-            cloud(source.vertices[half_s]),
-            cloud(target.vertices[half_t]),
-            np.where(known, nearest, -1),
-        ),
+        "cloud": (cloud(source), cloud(target), truth),
+        "cloud 50%": (cloud(source, half_s), cloud(target, half_t), np.where(known, nearest, -1)),
     }
     rows = []
     for representation in representations:
@@ -109,11 +110,14 @@ def pair_scores(
 
 def spectrum_errors(dataset, name: str, variants: dict, k: int = 10) -> dict:
     """Relative errors |E_i(cloud) / E_i(mesh) - 1| of the k lowest nonzero eigenvalues of one shape's vertices
-    as a cloud, one (mean, max) per entry {label: PointCloud keywords} of ``variants``."""
+    as a cloud, one (mean, max) per entry {label: PointCloud keywords} of ``variants`` (``normals="mesh"``:
+    the mesh's vertex normals, its faces oriented consistently, as a scanner's)."""
     mesh = dataset.load(name, largest_component=True)[0].scaled_to_unit_area()
     on_mesh = hamsa.eigenbasis(mesh, k + 1).values[1:]
     row = {"shape": name, "n": mesh.n_vertices}
     for label, options in variants.items():
+        if options.get("normals") == "mesh":
+            options = {**options, "normals": orient_faces(mesh).vertex_normals}
         errors = np.abs(hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices, **options), k + 1).values[1:] / on_mesh - 1)
         row[label] = (float(errors.mean()), float(errors.max()))
     return row
@@ -303,12 +307,17 @@ def main(argv=None) -> int:
         help="PointCloud(off_sheet=X): also leave out the neighbours X local spacings off a point's smooth sheet",
     )
     parser.add_argument(
+        "--mesh-normals",
+        action="store_true",
+        help="the clouds take their meshes' vertex normals (PointCloud(normals=)), as a scanner's normals",
+    )
+    parser.add_argument(
         "--spectra",
         nargs="+",
         metavar="SHAPE",
         help="instead of matching: the 10 lowest eigenvalues of these shapes (SCAPE meshNNN, TOSCA names) as "
         "clouds against their meshes: sheets separated by the normals, also off the sheet (--off-sheet, default 0.7), "
-        "and joined",
+        "joined, and separated by the mesh's normals",
     )
     parser.add_argument(
         "--signs",
@@ -393,6 +402,7 @@ def main(argv=None) -> int:
             "separated (normals)": {},
             f"off_sheet={off_sheet:g}": {"off_sheet": off_sheet},
             "joined (robust_laplacian)": {"separate_sheets": False},
+            "the mesh's normals": {"normals": "mesh"},
         }
         print(f"| shape | n | {' | '.join(f'{label}: mean / max rel. error' for label in variants)} |")
         print(f"|---|---|{'---|' * len(variants)}")
@@ -425,7 +435,16 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     results = Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
         delayed(pair_scores)(
-            dataset, s, t, args.k, args.points, args.methods, args.orientation, cloud_options, args.representations
+            dataset,
+            s,
+            t,
+            args.k,
+            args.points,
+            args.methods,
+            args.orientation,
+            cloud_options,
+            args.representations,
+            args.mesh_normals,
         )
         for dataset, s, t in work
     )

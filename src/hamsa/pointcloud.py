@@ -42,7 +42,9 @@ DEFAULT_NEIGHBORS = 30  # the local triangulation's neighbourhood size (Sharp & 
 # nearest points of the least-squares gradient and of the normals' orientation graph
 GRADIENT_NEIGHBORS = 10
 _NORMAL_ROUNDS = 2  # rounds of re-estimating the normals from the local triangulation's stars
-_CONSISTENT_SIGNS = 0.9  # given normals keep their signs when this share agrees with hamsa's orientation
+# given normals are unoriented when more links to the nearest points than this disagree in sign (consistent
+# normals: a few percent, where parts are thin; random signs: half)
+_UNORIENTED_LINKS = 0.25
 _REJOIN_ROUNDS = 4  # rounds of giving the neighbours back that the sheet rule left in another piece
 _FIT_ROUNDS = 8  # reweighting rounds of the robust quadratic fit of a point's sheet (``off_sheet``)
 STRAY_NEIGHBORS = 8  # nearest points linked in the stray-point test; larger groups are parts of the cloud
@@ -71,10 +73,11 @@ class PointCloud:
         alone decide. 0.7 is the measured choice (docs/results/point_clouds.md).
     normals : array_like, shape (n, 3), optional
         Normals that come with the points (a scanner's, a mesh's), used as :attr:`normals` instead of
-        estimated ones (rescaled to unit length). Their signs are kept when they are consistent -- on at least
-        90% of the points the same as the orientation hamsa gives their directions, or all reversed
-        (inward: then all are flipped) -- and their directions oriented as estimated ones are otherwise
-        (unoriented normals); :attr:`normals_origin` says which. None (default): estimated.
+        estimated ones (rescaled to unit length). Their signs are kept when they are consistent (at most a
+        quarter of the links to each point's nearest points join normals of opposite orientation), all
+        flipped if they point inward, and their directions oriented as estimated ones are otherwise
+        (unoriented normals); :attr:`normals_origin` says which. A patch of wrong signs in consistent normals
+        is kept and cuts the surface there. None (default): estimated.
 
     Raises
     ------
@@ -173,17 +176,18 @@ class PointCloud:
     def _given_oriented(self) -> tuple[np.ndarray, str]:
         """(the given normals as :attr:`normals` uses them, :attr:`normals_origin`)."""
         distances, indices = self._neighbourhoods
-        given = self._given_normals
-        oriented = _oriented(self._points, given, distances, indices)
-        agreement = np.mean(np.einsum("ij,ij->i", given, oriented) > 0)
-        if agreement >= _CONSISTENT_SIGNS:
+        given, n = self._given_normals, self.n_vertices
+        rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
+        columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
+        if np.mean(_transported_agreement(self._points, given, rows, columns) < 0) > _UNORIENTED_LINKS:
+            oriented = _oriented(self._points, given, distances, indices)
+            oriented.flags.writeable = False
+            return oriented, "given, re-oriented"
+        if np.einsum("ij,ij->", given, self._points - self._points.mean(axis=0)) >= 0:
             return given, "given"
-        if agreement <= 1 - _CONSISTENT_SIGNS:
-            flipped = -given
-            flipped.flags.writeable = False
-            return flipped, "given"
-        oriented.flags.writeable = False
-        return oriented, "given, re-oriented"
+        inward = -given
+        inward.flags.writeable = False
+        return inward, "given"
 
     def __repr__(self) -> str:
         return (
