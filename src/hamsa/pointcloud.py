@@ -22,7 +22,8 @@ and the triangles whose far edge joins two sheets where parts meet along a creas
 ``separate_sheets=False`` gives robust_laplacian's operator. The rule never splits the cloud into pieces,
 so separate objects that nearly touch stay joined, and where the normals' orientation fails (thin parts,
 wide contacts) short circuits stay; ``off_sheet=0.7`` also leaves out the neighbours that lie off a point's
-smooth sheet, whatever the normals say. Use the mesh when there is one.
+smooth sheet, whatever the normals say. Normals that come with the points (a scanner's: ``normals=``)
+replace the estimated ones. Use the mesh when there is one.
 """
 
 from __future__ import annotations
