@@ -28,12 +28,19 @@ def test_trimesh_objects_are_accepted_without_reordering(mesh):
     _same_spectrum(other, mesh)
 
 
-def test_pyvista_polydata_is_accepted_and_polygons_are_refused(mesh):
+def test_pyvista_polydata_is_accepted_and_its_polygons_cut_into_triangles(mesh):
     pv = pytest.importorskip("pyvista")
     cells = np.hstack([np.full((mesh.n_faces, 1), 3), mesh.faces]).ravel()
     _same_spectrum(pv.PolyData(mesh.vertices, cells), mesh)
-    with pytest.raises(MeshError, match="triangulate"):
-        as_trimesh(pv.Plane())  # quads
+    plane = pv.Plane(i_resolution=4, j_resolution=3)  # 12 quads
+    converted = as_trimesh(plane)
+    np.testing.assert_array_equal(converted.vertices, plane.points)
+    assert converted.n_faces == 24 and np.isclose(converted.area, plane.area)
+    # a hexagon (two corners on straight edges) beside a quad: a 3 x 1 strip of unit cells
+    points = np.array([[i, j, 0.0] for j in (0, 1) for i in range(4)])
+    strip = pv.PolyData(points, np.array([6, 0, 1, 2, 6, 5, 4, 4, 2, 3, 7, 6]))
+    converted = as_trimesh(strip)
+    assert converted.n_faces == 4 + 2 and np.isclose(converted.area, 3.0)
     with pytest.raises(MeshError, match="trimesh.Trimesh"):
         as_trimesh(np.zeros((3, 3)))
 

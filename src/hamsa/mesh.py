@@ -299,7 +299,7 @@ def as_trimesh(mesh_like) -> TriMesh:
 
     Accepted: a TriMesh; a ``(vertices, faces)`` pair of arrays; a ``trimesh.Trimesh`` (its arrays as
     they are — load with ``process=False`` so trimesh does not merge or reorder vertices); a
-    ``pyvista.PolyData`` made of triangles only (``.triangulate()`` it first otherwise).
+    ``pyvista.PolyData`` (polygons cut into triangles by :func:`triangulate_polygons`).
     """
     if isinstance(mesh_like, TriMesh):
         return mesh_like
@@ -309,10 +309,8 @@ def as_trimesh(mesh_like) -> TriMesh:
     if kind == "trimesh.Trimesh":
         return TriMesh(np.asarray(mesh_like.vertices), np.asarray(mesh_like.faces))
     if kind == "pyvista.PolyData":
-        cells = np.asarray(mesh_like.faces)
-        if cells.size % 4 or not np.all(cells.reshape(-1, 4)[:, 0] == 3):
-            raise MeshError("the PolyData has non-triangle faces: call .triangulate() first")
-        return TriMesh(np.asarray(mesh_like.points), cells.reshape(-1, 4)[:, 1:])
+        points = np.asarray(mesh_like.points)
+        return TriMesh(points, triangulate_polygons(points, *_vtk_polygons(np.asarray(mesh_like.faces))))
     if kind == "hamsa.PointCloud":
         raise MeshError("this needs a triangle mesh (its faces), and a point cloud has none")
     raise MeshError(
@@ -574,6 +572,23 @@ def triangulate_polygons(vertices, polygons, counts=None) -> np.ndarray:
         owners.append(np.repeat(chosen, triangles.shape[1]))
     order = np.argsort(np.concatenate(owners), kind="stable")
     return np.concatenate(pieces)[order]
+
+
+def _vtk_polygons(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(corners concatenated, corner counts (m,)) of a VTK face array ``[c, i_1 .. i_c, c, ...]``."""
+    for size in (3, 4):  # all triangles or all quads: one reshape
+        if cells.size % (size + 1) == 0 and np.all(cells[:: size + 1] == size):
+            rows = cells.reshape(-1, size + 1)
+            return rows[:, 1:].ravel(), np.full(len(rows), size)
+    counts, starts, at = [], [], 0
+    while at < cells.size:
+        counts.append(int(cells[at]))
+        starts.append(at + 1)
+        at += 1 + counts[-1]
+    if at != cells.size or min(counts, default=3) < 0:
+        raise MeshError("the PolyData's face array does not parse as [count, ids ...] records")
+    corners = np.concatenate([cells[s : s + c] for s, c in zip(starts, counts)]) if counts else cells[:0]
+    return corners, np.array(counts, dtype=np.int64)
 
 
 def _newell_normals(points: np.ndarray) -> np.ndarray:
