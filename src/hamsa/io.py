@@ -100,7 +100,7 @@ def load_point_cloud(
     file_normals: bool = True,
 ) -> PointCloud:
     """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
-    or commas; further columns such as normals or colours are ignored), ``.npy`` ((n, 3) or wider), or the
+    or commas; further columns are ignored but normals, below), ``.npy`` ((n, 3) or wider), or the
     vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
 
     Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
