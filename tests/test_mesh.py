@@ -124,5 +124,9 @@ def test_triangulate_polygons_cuts_quads_along_the_right_diagonal_and_accepts_th
     assert faces.tolist() == triangulate_polygons(vertices, quads.ravel(), counts=[4, 4]).tolist()
     with pytest.raises(MeshError, match="counts sum to 7, but 8 corners"):
         triangulate_polygons(vertices, quads.ravel(), counts=[4, 3])
-    # triangles pass through unchanged
+    # triangles pass through unchanged; a quad with a repeated corner is the triangle it stands for
     assert triangulate_polygons(vertices, np.array([[0, 1, 2]])).tolist() == [[0, 1, 2]]
+    assert triangulate_polygons(vertices, [[0, 1, 2, 2], [3, 3, 0, 1], [4, 5, 6, 7]]).tolist()[:2] == [
+        [0, 1, 2],
+        [3, 0, 1],
+    ]

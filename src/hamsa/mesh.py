@@ -510,7 +510,8 @@ def triangulate_polygons(vertices, polygons, counts=None) -> np.ndarray:
     Parameters
     ----------
     vertices : (n, 3) coordinates
-    polygons : (m, c) integer array of c-gons, a sequence of m index sequences (mixed sizes), or with
+    polygons : (m, c) integer array of c-gons (a corner that repeats the one before it is left out, so a quad
+        ``a b c c`` gives the triangle ``a b c``), a sequence of m index sequences (mixed sizes), or with
         ``counts`` the corners of all polygons concatenated
     counts : (m,) the number of corners of each polygon, when ``polygons`` is flat
 
@@ -544,6 +545,7 @@ def triangulate_polygons(vertices, polygons, counts=None) -> np.ndarray:
         corner = int(np.argmax((flat < 0) | (flat >= n)))
         face = int(np.searchsorted(np.cumsum(counts), corner, side="right"))
         raise MeshError(f"face {face} references vertex {flat[corner]}, mesh has {n} vertices")
+    counts, flat = _without_repeated_corners(counts, flat)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     pieces, owners = [], []
     for size in np.unique(counts):
@@ -572,6 +574,20 @@ def triangulate_polygons(vertices, polygons, counts=None) -> np.ndarray:
         owners.append(np.repeat(chosen, triangles.shape[1]))
     order = np.argsort(np.concatenate(owners), kind="stable")
     return np.concatenate(pieces)[order]
+
+
+def _without_repeated_corners(counts: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The polygons (counts, corners) with a corner that repeats the one before it (cyclically) left out of
+    every polygon of 4 or more corners that keeps at least 3: a quad ``a b c c`` is the triangle ``a b c``."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    position = np.arange(len(flat)) - starts[owner]
+    repeated = flat == flat[starts[owner] + (position + 1) % counts[owner]]
+    left = counts - np.bincount(owner, repeated, len(counts)).astype(np.int64)
+    repeated &= ((counts >= 4) & (left >= 3))[owner]
+    if not repeated.any():
+        return counts, flat
+    return counts - np.bincount(owner, repeated, len(counts)).astype(np.int64), flat[~repeated]
 
 
 def _vtk_polygons(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
