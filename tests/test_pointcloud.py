@@ -692,3 +692,24 @@ def test_point_files_with_normals_give_them_to_the_cloud(tmp_path, capsys):
     hamsa.save_mesh(hamsa.shapes.icosphere(1), tmp_path / "mesh.off")
     assert main(["info", str(tmp_path / "mesh.off"), "--estimate-normals"]) == 2
     assert "--estimate-normals: for point clouds" in capsys.readouterr().err
+
+
+def test_a_point_file_is_read_once_for_its_points_and_normals(tmp_path, monkeypatch):
+    """load_point_cloud, load_shape and the CLI's --repair take the points and the normals from one read of
+    the file, and the normals are the file's."""
+    import hamsa.io
+    from hamsa.cli import main
+
+    points, normals, _ = _thin_shell()
+    np.savetxt(tmp_path / "a.xyz", np.hstack([points, normals]))
+    reads = []
+    read_bytes = hamsa.io.read_bytes
+    monkeypatch.setattr(hamsa.io, "read_bytes", lambda *a, **k: reads.append(a[0]) or read_bytes(*a, **k))
+    for load in (hamsa.load_point_cloud, hamsa.io.load_shape):
+        reads.clear()
+        cloud = load(tmp_path / "a.xyz")
+        assert len(reads) == 1, load.__name__
+        np.testing.assert_allclose(cloud.normals, normals, atol=1e-12)
+    reads.clear()
+    assert main(["basis", str(tmp_path / "a.xyz"), "-k", "4", "--repair", "-o", str(tmp_path / "b.npz")]) == 0
+    assert len(reads) == 1

@@ -135,14 +135,13 @@ def _cloud_options(args) -> dict:
     }
 
 
-def _repaired_cloud(path: str, points: np.ndarray, cloud: dict, keep: str = "all"):
-    """:func:`hamsa.repair.repair_point_cloud` of a point file's points with the :func:`_cloud_options`
-    ``cloud`` (the file's normals unless --estimate-normals)."""
-    from hamsa.io import read_vertex_normals
+def _repaired_cloud(points: np.ndarray, normals: np.ndarray | None, cloud: dict, keep: str = "all"):
+    """:func:`hamsa.repair.repair_point_cloud` of a point file's points and normals (from
+    :func:`hamsa.io.read_shape_arrays`, asked for when ``cloud["file_normals"]``) with the other
+    :func:`_cloud_options` of ``cloud``."""
     from hamsa.repair import repair_point_cloud
 
-    options = dict(cloud)
-    normals = read_vertex_normals(path) if options.pop("file_normals") else None
+    options = {name: value for name, value in cloud.items() if name != "file_normals"}
     return repair_point_cloud(points, keep=keep, normals=normals, **options)
 
 
@@ -179,9 +178,10 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
         from hamsa.io import read_shape_arrays
         from hamsa.repair import repair_mesh
 
-        vertices, faces = read_shape_arrays(path)
+        cloud = cloud or {"file_normals": True}
+        vertices, faces, normals = read_shape_arrays(path, normals=cloud["file_normals"])
         if faces is None:
-            shape, kept, report = _repaired_cloud(path, vertices, cloud or {"file_normals": True}, keep="largest")
+            shape, kept, report = _repaired_cloud(vertices, normals, cloud, keep="largest")
         else:
             shape, kept, report = repair_mesh(vertices, faces, keep="largest")
         if not report.changed:
@@ -633,11 +633,12 @@ def _info(args) -> None:
     try:
         mesh = load_shape(args.mesh, manifold=False, **_cloud_options(args))
     except MeshError as error:  # a cloud with NaN or repeated points: described without them
-        points, faces = read_shape_arrays(args.mesh)
+        cloud = _cloud_options(args)
+        points, faces, normals = read_shape_arrays(args.mesh, normals=cloud["file_normals"])
         if faces is not None:
             raise
         try:
-            mesh, _, report = _repaired_cloud(args.mesh, points, _cloud_options(args))
+            mesh, _, report = _repaired_cloud(points, normals, cloud)
         except MeshError:
             raise error from None
         dropped = f" of {len(points)} in the file; the lines below leave out {str(report).removeprefix('repaired: ')}"

@@ -68,10 +68,9 @@ def load_shape(
     (:func:`read_vertex_normals`) unless ``file_normals=False``, which estimates them. Raises
     MeshError naming the file if it cannot be read or does not make a valid mesh or cloud.
     """
-    vertices, faces = read_shape_arrays(path)
+    vertices, faces, normals = read_shape_arrays(path, normals=file_normals)
     try:
         if faces is None:
-            normals = read_vertex_normals(path) if file_normals else None
             return PointCloud(
                 vertices, neighbors=neighbors, separate_sheets=separate_sheets, off_sheet=off_sheet, normals=normals
             )
@@ -80,14 +79,21 @@ def load_shape(
         raise _naming(path, exc) from None
 
 
-def read_shape_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]:
-    """The raw ``(vertices, faces)`` of a mesh file, or ``(points, None)`` of a point file (a points-only format,
-    or an OFF / OBJ / PLY / STL without faces), before any validation: what :func:`load_shape` builds its
-    shape from. Raises MeshError naming the file if it cannot be read or parsed."""
+def read_shape_arrays(
+    path: str | os.PathLike, *, normals: bool = True
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """The raw ``(vertices, faces, normals)`` of a mesh file, or ``(points, None, normals)`` of a point file (a
+    points-only format, or an OFF / OBJ / PLY / STL without faces), before any validation: what
+    :func:`load_shape` builds its shape from, from one parse of the file.
+
+    ``normals`` is the (n, 3) per-vertex normals the file holds as :func:`read_vertex_normals` reads them, or
+    None when it holds none or ``normals=False``. Raises MeshError naming the file if it cannot be read or
+    parsed."""
     if _suffix(path)[0] in POINTS_ONLY:
-        return read_point_array(path), None
-    vertices, faces = read_mesh_arrays(path)
-    return vertices, faces if len(faces) else None
+        points, file_normals = _read_point_file(path, normals)
+        return points, None, file_normals
+    vertices, faces, file_normals = _read_mesh_file(path, normals)
+    return vertices, faces if len(faces) else None, file_normals
 
 
 def load_point_cloud(
@@ -111,9 +117,9 @@ def load_point_cloud(
     be read or parsed, or if the points do not make a valid :class:`~hamsa.pointcloud.PointCloud` (too few,
     NaN, repeated).
     """
-    points = read_point_array(path)
+    points, normals = _read_point_file(path, file_normals)
     options = {"neighbors": neighbors, "separate_sheets": separate_sheets, "off_sheet": off_sheet}
-    options["normals"] = read_vertex_normals(path) if file_normals else None
+    options["normals"] = normals
     try:
         if not repair:
             return PointCloud(points, **options)
@@ -131,29 +137,43 @@ def read_point_array(path: str | os.PathLike) -> np.ndarray:
     """The raw (n, 3) float64 points of a point file, as :func:`load_point_cloud` reads them, before any
     validation (for inspecting or repairing a cloud it refuses). Raises MeshError naming the file if it cannot
     be read or parsed."""
+    return _read_point_file(path, normals=False)[0]
+
+
+def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """(points, the normals the file holds or None) of a point file, from one parse; normals only when asked."""
     fmt = point_format(path)
     if fmt is None:
         raise MeshError(
             f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .npy .off .obj .ply (optionally .gz)"
         )
     kind, gzipped = fmt
+    if kind in ("off", "obj", "ply"):
+        return _read_mesh_file(path, normals)[::2]
     try:
         if kind == "npy":
             points = load_array(path, ndim=2)
             if points.shape[1] < 3:
                 raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
-            return np.asarray(points[:, :3], dtype=np.float64)
-        if kind in ("xyz", "pts", "txt"):
-            text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8")
-            lines = [line.replace(",", " ") for line in _data_lines(text)]
-            if not lines:
-                raise MeshError("no points in the file")
-            return _fixed_width(lines, 3, "point")
-        return read_mesh_arrays(path)[0]
+            return np.asarray(points[:, :3], dtype=np.float64), None
+        text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8")
+        lines = [line.replace(",", " ") for line in _data_lines(text)]
+        if not lines:
+            raise MeshError("no points in the file")
+        table = _fixed_width(lines, 3, "point", spare=3 if normals else 0)
+        return table[:, :3], _unit_rows(table[:, 3:])
     except FileAccessError as exc:
         raise MeshError(str(exc)) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
+
+
+def _unit_rows(columns: np.ndarray) -> np.ndarray | None:
+    """Columns 4-6 of a point file as normals when they are unit vectors on every line (``x y z nx ny nz``), else
+    None (``x y z r g b``, or no such columns)."""
+    if columns.shape[1] < 3 or not np.all(np.abs(np.linalg.norm(columns, axis=1) - 1) < 1e-3):
+        return None
+    return columns
 
 
 def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
@@ -218,49 +238,11 @@ def read_vertex_normals(path: str | os.PathLike) -> np.ndarray | None:
     ``CNOFF`` file's vertex lines, OBJ ``vn`` lines when there are as many as ``v`` lines (fewer or more are
     per-corner normals that the faces index: None), or the fourth to sixth columns of an ``.xyz`` / ``.pts``
     / ``.txt`` file when they are unit vectors on every line (``x y z nx ny nz``; other columns, such as
-    ``x y z r g b``, are not normals). ``.npy`` files hold none. ``.gz`` too. Raises MeshError naming the
-    file if it cannot be read or parsed.
+    ``x y z r g b``, are not normals). ``.npy`` and STL files hold none. ``.gz`` too. Raises MeshError naming
+    the file if it cannot be read or parsed; :func:`read_shape_arrays` gives the vertices and faces of the
+    same parse.
     """
-    fmt, gzipped = _suffix(path)
-    if fmt not in ("ply", "off", "obj", "xyz", "pts", "txt"):
-        return None
-    try:
-        data = read_bytes(path, decompress="gzip" if gzipped else None)
-        reader = {"ply": _ply_normals, "off": _off_normals, "obj": _obj_normals}.get(fmt, _text_normals)
-        return reader(data)
-    except FileAccessError as exc:
-        raise MeshError(str(exc)) from None
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise _naming(path, MeshError(str(exc))) from None
-    except MeshError as exc:
-        raise _naming(path, exc) from None
-
-
-_PLY_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
-
-
-def _ply_normals(data: bytes) -> np.ndarray | None:
-    table, _ = _read_ply_tables(data)
-    names = next((names for names in _PLY_NORMALS if all(name in table for name in names)), None)
-    return None if names is None else np.stack([table[name].astype(np.float64) for name in names], axis=1)
-
-
-def _off_normals(data: bytes) -> np.ndarray | None:
-    variant, vertex_lines, _ = _off_parts(data)
-    return _fixed_width(vertex_lines, 6, "vertex")[:, 3:] if variant.endswith("NOFF") else None
-
-
-def _obj_normals(data: bytes) -> np.ndarray | None:
-    vertex_lines, _, normal_lines = _obj_lines(data)
-    return _fixed_width(normal_lines, 3, "normal") if len(normal_lines) == len(vertex_lines) else None
-
-
-def _text_normals(data: bytes) -> np.ndarray | None:
-    lines = [line.replace(",", " ") for line in _data_lines(data.decode("utf-8"))]
-    if not lines or min(len(line.split()) for line in lines) < 6:
-        return None
-    columns = _fixed_width(lines, 6, "point")[:, 3:]
-    return columns if np.all(np.abs(np.linalg.norm(columns, axis=1) - 1) < 1e-3) else None
+    return read_shape_arrays(path)[2]
 
 
 def read_vertex_colors(path: str | os.PathLike) -> np.ndarray:
@@ -323,6 +305,12 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     For inspecting or repairing a mesh that :func:`load_mesh` refuses. Raises MeshError if the file
     cannot be read or parsed as its format.
     """
+    return _read_mesh_file(path, normals=False)[:2]
+
+
+def _read_mesh_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(vertices, faces, the per-vertex normals the file holds or None) of an OFF / OBJ / PLY / STL file, from
+    one parse; normals only when asked."""
     fmt, gzipped = mesh_format(path)
     try:
         data = read_bytes(path, decompress="gzip" if gzipped else None)
@@ -330,9 +318,10 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise MeshError(str(exc)) from None
     if not data.strip():
         raise MeshError(f"cannot read '{path}': the file is empty")
-    reader = {"off": _read_off, "obj": _read_obj, "ply": _read_ply, "stl": _read_stl}[fmt]
     try:
-        return reader(data)
+        if fmt == "stl":  # facet normals only
+            return (*_read_stl(data), None)
+        return {"off": _read_off, "obj": _read_obj, "ply": _read_ply}[fmt](data, normals)
     except MeshError as exc:
         raise MeshError(f"'{path}': {exc}") from None
     except (ValueError, IndexError, struct.error, UnicodeDecodeError) as exc:
@@ -364,13 +353,16 @@ def _data_lines(text: str) -> list[str]:
     return lines
 
 
-def _fixed_width(lines: list[str], width: int, what: str) -> np.ndarray:
-    """Parse ``lines`` of whitespace-separated numbers, keeping the first ``width`` columns."""
+def _fixed_width(lines: list[str], width: int, what: str, spare: int = 0) -> np.ndarray:
+    """Parse ``lines`` of whitespace-separated numbers, keeping the first ``width`` columns, and the ``spare``
+    columns after them too when every line has them."""
     tokens = [line.split() for line in lines]
     lengths = {len(t) for t in tokens}
     if min(lengths) < width:
         bad = next(i for i, t in enumerate(tokens) if len(t) < width)
         raise MeshError(f"{what} {bad} has {len(tokens[bad])} values, expected {width}")
+    if min(lengths) >= width + spare:
+        width += spare
     if len(lengths) == 1:
         arr = np.array(" ".join(lines).split(), dtype=np.float64).reshape(len(lines), -1)
         return arr[:, :width]
@@ -386,11 +378,13 @@ def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
     return rows.astype(np.int64)
 
 
-def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    _, vertex_lines, face_lines = _off_parts(data)
-    vertices = _fixed_width(vertex_lines, 3, "vertex")
+def _read_off(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    variant, vertex_lines, face_lines = _off_parts(data)
+    with_normals = normals and variant.endswith("NOFF")  # x y z nx ny nz [colour]
+    table = _fixed_width(vertex_lines, 6 if with_normals else 3, "vertex")
+    vertices = table[:, :3]
     counts, corners = _off_polygons(face_lines)
-    return vertices, triangulate_polygons(vertices, corners, counts)
+    return vertices, triangulate_polygons(vertices, corners, counts), table[:, 3:] if with_normals else None
 
 
 def _off_parts(data: bytes) -> tuple[str, list[str], list[str]]:
@@ -434,8 +428,8 @@ def _off_polygons(face_lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
     return counts, _integer_faces(rows, "face").ravel()
 
 
-def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    vertex_lines, face_lines, _ = _obj_lines(data)
+def _read_obj(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    vertex_lines, face_lines, normal_lines = _obj_lines(data)
     vertices = _fixed_width(vertex_lines, 3, "vertex")
     n = len(vertices)
     flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
@@ -447,7 +441,10 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     corners = np.where(corners > 0, corners - 1, corners + n)
     if np.any(np.asarray(flat) == 0):
         raise MeshError("OBJ face index 0 is invalid (indices are 1-based)")
-    return vertices, triangulate_polygons(vertices, corners, [len(f) for f in face_lines])
+    faces = triangulate_polygons(vertices, corners, [len(f) for f in face_lines])
+    # as many 'vn' as 'v' lines: one normal per vertex; otherwise per-corner normals that the faces index
+    per_vertex = normals and len(normal_lines) == n
+    return vertices, faces, _fixed_width(normal_lines, 3, "normal") if per_vertex else None
 
 
 def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]], list[str]]:
@@ -488,11 +485,19 @@ _PLY_TYPES = {
 }
 
 
-def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+_PLY_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
+
+
+def _read_ply(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     table, faces = _read_ply_tables(data)
     _require_properties(table, "xyz")
     vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
-    return vertices, np.zeros((0, 3), dtype=np.int64) if faces is None else faces  # a point cloud: no faces
+    if faces is None:  # a point cloud
+        faces = np.zeros((0, 3), dtype=np.int64)
+    names = next((names for names in _PLY_NORMALS if all(name in table for name in names)), None)
+    if not normals or names is None:
+        return vertices, faces, None
+    return vertices, faces, np.stack([table[name].astype(np.float64) for name in names], axis=1)
 
 
 def _read_ply_tables(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
