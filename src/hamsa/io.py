@@ -169,11 +169,14 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
 
 
 def _unit_rows(columns: np.ndarray) -> np.ndarray | None:
-    """Columns 4-6 of a point file as normals when they are unit vectors on every line (``x y z nx ny nz``), else
-    None (``x y z r g b``, or no such columns)."""
-    if columns.shape[1] < 3 or not np.all(np.abs(np.linalg.norm(columns, axis=1) - 1) < 1e-3):
+    """Columns 4-6 of a point file as normals when they are unit vectors on every line but those where they are
+    zero or not finite (a point without a normal: ``x y z nx ny nz``), else None (``x y z r g b``, or no such
+    columns)."""
+    if columns.shape[1] < 3:
         return None
-    return columns
+    length = np.linalg.norm(columns, axis=1)
+    given = np.isfinite(length) & (length > 0)
+    return columns if given.any() and np.all(np.abs(length[given] - 1) < 1e-3) else None
 
 
 def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
@@ -238,7 +241,8 @@ def read_vertex_normals(path: str | os.PathLike) -> np.ndarray | None:
     ``CNOFF`` file's vertex lines, OBJ ``vn`` lines when there are as many as ``v`` lines (fewer or more are
     per-corner normals that the faces index: None), or the fourth to sixth columns of an ``.xyz`` / ``.pts``
     / ``.txt`` file when they are unit vectors on every line (``x y z nx ny nz``; other columns, such as
-    ``x y z r g b``, are not normals). ``.npy`` and STL files hold none. ``.gz`` too. Raises MeshError naming
+    ``x y z r g b``, are not normals). Rows of zeros or NaN (points without a normal) are returned as they
+    are, for the cloud to estimate there. ``.npy`` and STL files hold none. ``.gz`` too. Raises MeshError naming
     the file if it cannot be read or parsed; :func:`read_shape_arrays` gives the vertices and faces of the
     same parse.
     """

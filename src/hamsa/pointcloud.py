@@ -78,7 +78,9 @@ class PointCloud:
         quarter of the links to each point's nearest points join normals of opposite orientation), all
         flipped if they point inward, and their directions oriented as estimated ones are otherwise
         (unoriented normals); :attr:`normals_origin` says which. A patch of wrong signs in consistent normals
-        is kept and cuts the surface there. None (default): estimated.
+        is kept and cuts the surface there. A zero or non-finite row (a point the scanner gave no normal) is
+        estimated at that point and oriented like its neighbours' given normals, with an
+        :class:`~hamsa.errors.InputWarning`. None (default): estimated.
 
     Raises
     ------
@@ -86,12 +88,13 @@ class PointCloud:
         If the array is not real (n, 3), has non-finite or huge coordinates, has no more than ``neighbors``
         points or repeats a point (two samples at one place have no tangent-plane triangulation between
         them; remove duplicates first), if ``off_sheet`` is not a positive number or comes with
-        ``separate_sheets=False``, or if ``normals`` is not (n, 3) or has a non-finite or zero row.
+        ``separate_sheets=False``, or if ``normals`` is not (n, 3).
 
     Warns
     -----
     InputWarning
-        If the cloud has :attr:`stray_points` (each adds a spurious low eigenpair).
+        If the cloud has :attr:`stray_points` (each adds a spurious low eigenpair), or if some given normals
+        are zero or not finite (estimated there).
 
     Examples
     --------
@@ -115,6 +118,16 @@ class PointCloud:
         points = as_coordinates(points, "points")
         check_coordinates(points, "points")
         self._given_normals = None if normals is None else _unit_normals(normals, len(points))
+        missing = np.flatnonzero(np.isnan(self._given_normals[:, 0])) if normals is not None else []
+        if len(missing):
+            warnings.warn(
+                f"{len(missing)} of the {len(points)} given normals are zero or not finite ({format_ids(missing)}): "
+                + ("estimated at those points" if len(missing) < len(points) else "all estimated"),
+                InputWarning,
+                stacklevel=2,
+            )
+        if len(missing) == len(points):
+            self._given_normals = None
         if not isinstance(neighbors, (int, np.integer)) or neighbors < 3:
             raise MeshError(f"neighbors must be an integer >= 3, got {neighbors!r}")
         if off_sheet is not None and not (isinstance(off_sheet, (int, float, np.number)) and 0 < off_sheet < np.inf):
@@ -170,25 +183,46 @@ class PointCloud:
     @property
     def normals_origin(self) -> str:
         """Where :attr:`normals` come from: ``"estimated"``, ``"given"`` (the constructor's, their signs kept or
-        all flipped outward) or ``"given, re-oriented"`` (their directions, signs made consistent by hamsa)."""
+        all flipped outward) or ``"given, re-oriented"`` (their directions, signs made consistent by hamsa),
+        followed by ``", estimated at m points"`` when m given rows were zero or not finite."""
         return "estimated" if self._given_normals is None else self._given_oriented[1]
 
     @cached_property
     def _given_oriented(self) -> tuple[np.ndarray, str]:
-        """(the given normals as :attr:`normals` uses them, :attr:`normals_origin`)."""
+        """(the given normals as :attr:`normals` uses them, :attr:`normals_origin`).
+
+        The links from each point to its :data:`GRADIENT_NEIGHBORS` nearest points that join two given normals
+        decide: more than :data:`_UNORIENTED_LINKS` of them disagreeing in sign (:func:`_transported_agreement`)
+        makes the normals unoriented, and their directions are oriented by :func:`_oriented`; otherwise their
+        signs are kept, all flipped if they point inward. A missing row (NaN, :func:`_unit_normals`) takes the
+        direction of the plane fitted to the point's nearest points, oriented to agree with the given normals
+        of its neighbours (with the orientation :func:`_oriented` gives the whole cloud where it has none)."""
         distances, indices = self._neighbourhoods
         given, n = self._given_normals, self.n_vertices
+        missing = np.isnan(given[:, 0])
         rows = np.repeat(np.arange(n), GRADIENT_NEIGHBORS)
         columns = indices[:, 1 : GRADIENT_NEIGHBORS + 1].reshape(-1)
-        if np.mean(_transported_agreement(self._points, given, rows, columns) < 0) > _UNORIENTED_LINKS:
-            oriented = _oriented(self._points, given, distances, indices)
+        directions = given.copy()
+        directions[missing] = _plane_normals(self._points, indices[missing, : self._fitted])
+        known = ~missing[rows] & ~missing[columns]
+        agreement = _transported_agreement(self._points, directions, rows, columns)
+        estimated = f", estimated at {missing.sum()} points" if missing.any() else ""
+        if np.mean(agreement[known] < 0) > _UNORIENTED_LINKS:
+            oriented = _oriented(self._points, directions, distances, indices)
             oriented.flags.writeable = False
-            return oriented, "given, re-oriented"
-        if np.einsum("ij,ij->", given, self._points - self._points.mean(axis=0)) >= 0:
-            return given, "given"
-        inward = -given
-        inward.flags.writeable = False
-        return inward, "given"
+            return oriented, "given, re-oriented" + estimated
+        if np.einsum("ij,ij->", given[~missing], self._points[~missing] - self._points.mean(axis=0)) < 0:
+            directions[~missing] *= -1
+            agreement *= np.where(missing[rows] == missing[columns], 1.0, -1.0)
+        if missing.any():
+            votes = np.bincount(rows, np.where(missing[rows] & ~missing[columns], agreement, 0.0), n)[missing]
+            overall = _oriented(self._points, directions, distances, indices)
+            if np.einsum("ij,ij->", overall[~missing], directions[~missing]) < 0:
+                overall *= -1
+            directions[missing] *= np.where(votes != 0, np.sign(votes), 0.0)[:, None]
+            directions[missing] += np.where(votes == 0, 1.0, 0.0)[:, None] * overall[missing]
+        directions.flags.writeable = False
+        return directions, "given" + estimated
 
     def __repr__(self) -> str:
         return (
@@ -386,6 +420,11 @@ class PointCloud:
         """(distances, indices), both (n, neighbors + 1): each point's nearest points, itself first."""
         return cKDTree(self._points).query(self._points, k=self.neighbors + 1)
 
+    @property
+    def _fitted(self) -> int:
+        """How many of each point's nearest points (itself first) the plane of its first normal is fitted to."""
+        return 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)
+
     @cached_property
     def normals(self) -> np.ndarray:
         """(n, 3) unit normals, consistently oriented and pointing outward (read-only).
@@ -404,14 +443,7 @@ class PointCloud:
         if self._given_normals is not None:
             return self._given_oriented[0]
         distances, indices = self._neighbourhoods
-        n = self.n_vertices
-        fitted = 1 + max(GRADIENT_NEIGHBORS, self.neighbors // 2)  # the point and its nearest ones
-        directions = np.empty((n, 3))
-        for rows in _chunks(n, indices.shape[1] * 3):  # (chunk, neighbors + 1, 3) at a time: bounded memory
-            neighbourhood = self._points[indices[rows, :fitted]]
-            spread = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
-            directions[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
-        normals = _oriented(self._points, directions, distances, indices)
+        normals = _oriented(self._points, _plane_normals(self._points, indices[:, : self._fitted]), distances, indices)
         for _ in range(_NORMAL_ROUNDS):
             stars = self._triangulate(normals, None)[0]
             normals = _oriented(self._points, _star_normals(self._points, stars, normals), distances, indices)
@@ -473,17 +505,27 @@ class PointCloud:
 
 
 def _unit_normals(normals, n: int) -> np.ndarray:
-    """Given normals as a read-only (n, 3) float64 array of unit rows; MeshError naming what is wrong."""
+    """Given normals as a read-only (n, 3) float64 array of unit rows, NaN rows where they are zero or not
+    finite (missing); MeshError if the shape is not (n, 3)."""
     normals = np.array(normals, dtype=np.float64)
     if normals.shape != (n, 3):
         raise MeshError(f"normals have shape {normals.shape}, expected ({n}, 3): one per point")
     length = np.linalg.norm(normals, axis=1)
-    bad = np.flatnonzero(~(np.isfinite(length) & (length > 0)))
-    if len(bad):
-        raise MeshError(f"{len(bad)} normals are zero or not finite ({format_ids(bad)})")
-    normals /= length[:, None]
+    usable = np.isfinite(length) & (length > 0)
+    normals = np.where(usable[:, None], normals / np.where(usable, length, 1.0)[:, None], np.nan)
     normals.flags.writeable = False
     return normals
+
+
+def _plane_normals(points: np.ndarray, neighbourhoods: np.ndarray) -> np.ndarray:
+    """(m, 3) unit normals of the least-squares planes through the points ``neighbourhoods`` (m, k) (PCA: the
+    direction of least variance), unoriented."""
+    directions = np.empty((len(neighbourhoods), 3))
+    for rows in _chunks(len(neighbourhoods), neighbourhoods.shape[1] * 3):  # bounded memory
+        neighbourhood = points[neighbourhoods[rows]]
+        spread = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
+        directions[rows] = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))[1][:, :, 0]
+    return directions
 
 
 def stray_points(points, nearest: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
