@@ -251,3 +251,64 @@ def test_polygon_faces_are_cut_into_triangles_that_tile_each_polygon(tmp_path, k
     assert mesh.is_consistently_oriented and mesh.boundary_loops and len(mesh.boundary_loops) == 1
     owner = np.repeat(np.arange(len(polygons)), [len(p) - 2 for p in polygons])  # triangles in polygon order
     assert all(set(face) <= set(polygons[o]) for face, o in zip(mesh.faces.tolist(), owner))
+
+
+def _ply_header(form: str, vertices: int, elements: str) -> bytes:
+    return (f"ply\nformat {form} 1.0\nelement vertex {vertices}\nproperty float x\nproperty float y\n"
+            f"property float z\n{elements}end_header\n").encode()  # fmt: skip
+
+
+def test_ply_faces_with_texture_lists_flags_and_other_elements(tmp_path):
+    """Faces as photogrammetry and MeshLab write them: a flag before the index list and per-corner texture
+    coordinates after it, then an edge element and one with lists, binary (triangles; triangles and quads,
+    read record by record) and ASCII: the mesh is the one written."""
+    sphere = hamsa.shapes.icosphere(2)
+    vertices, faces = sphere.vertices.astype("<f4"), sphere.faces
+    face = ("element face {}\nproperty uchar flags\nproperty list uchar int vertex_indices\n"
+            "property list uchar float texcoord\n")  # fmt: skip
+    others = ("element edge 1\nproperty int vertex1\nproperty int vertex2\n"
+              "element material 1\nproperty list uchar float shine\n")  # fmt: skip
+    elements = face.format(len(faces)) + others
+    body = vertices.tobytes()
+    for triangle in faces:
+        body += b"\x01\x03" + triangle.astype("<i4").tobytes() + b"\x06" + np.zeros(6, "<f4").tobytes()
+    body += np.array([0, 1], "<i4").tobytes() + b"\x02" + np.ones(2, "<f4").tobytes()
+    (tmp_path / "b.ply").write_bytes(_ply_header("binary_little_endian", len(vertices), elements) + body)
+    text = "\n".join(" ".join(map(repr, v.tolist())) for v in vertices) + "\n"
+    text += "".join(f"1 3 {a} {b} {c} 6 0 0 0 0 0 0\n" for a, b, c in faces) + "0 1\n2 1.0 1.0\n"
+    (tmp_path / "a.ply").write_bytes(_ply_header("ascii", len(vertices), elements) + text.encode())
+    for name in ("b.ply", "a.ply"):
+        mesh = hamsa.load_mesh(tmp_path / name)
+        np.testing.assert_array_equal(mesh.faces, faces, err_msg=name)
+        np.testing.assert_allclose(mesh.vertices, vertices, err_msg=name)
+    grid, polygons = _polygon_grid()
+    quads = [p for p in polygons if len(p) in (3, 4)]
+    body = grid.astype("<f4").tobytes()
+    for p in quads:
+        body += b"\x01" + bytes([len(p)]) + np.asarray(p, "<i4").tobytes()
+        body += bytes([2 * len(p)]) + np.zeros(2 * len(p), "<f4").tobytes()
+    (tmp_path / "q.ply").write_bytes(_ply_header("binary_little_endian", len(grid), face.format(len(quads))) + body)
+    assert hamsa.load_mesh(tmp_path / "q.ply", repair=False).n_faces == sum(len(p) - 2 for p in quads)
+
+
+def test_ply_triangle_strips_are_read(tmp_path):
+    """A 5 x 5 grid of squares written as PLY triangle strips, one per row, in one list separated by -1
+    (ASCII) and one list per row with a repeated corner (binary): 50 triangles all facing one way, area 25."""
+    x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    grid = np.stack([x.ravel(), y.ravel(), np.zeros(36)], axis=1)
+    strips = [[i + 6 * (row + up) for i in range(6) for up in (0, 1)] for row in range(5)]
+    joined = [i for strip in strips for i in [*strip, -1]][:-1]
+    element = "element tristrips {}\nproperty list int int vertex_indices\n"
+    text = "\n".join(" ".join(map(str, v)) for v in grid.tolist()) + f"\n{len(joined)} {' '.join(map(str, joined))}\n"
+    (tmp_path / "a.ply").write_bytes(_ply_header("ascii", 36, element.format(1)) + text.encode())
+    body = grid.astype("<f4").tobytes()
+    for strip in strips:
+        strip = [*strip, strip[-1]]  # a repeated corner: a triangle of no area, left out
+        body += np.array([len(strip), *strip], "<i4").tobytes()
+    (tmp_path / "b.ply").write_bytes(_ply_header("binary_little_endian", 36, element.format(5)) + body)
+    for name in ("a.ply", "b.ply"):
+        mesh = hamsa.load_mesh(tmp_path / name)
+        a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+        normals = np.cross(b - a, c - a)[:, 2]
+        assert mesh.n_faces == 50 and (np.all(normals > 0) or np.all(normals < 0)), name
+        assert np.isclose(mesh.area, 25.0) and mesh.is_consistently_oriented, name

@@ -4,7 +4,9 @@ and the vertices of OFF / OBJ / PLY), optionally gzip-compressed.
 The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
 correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
 unindexed triangles, so identical coordinates are merged in the order they first appear. Faces with
-more than three corners (OFF, OBJ, PLY) are cut into triangles by :func:`hamsa.mesh.triangulate_polygons`.
+more than three corners (OFF, OBJ, PLY) are cut into triangles by :func:`hamsa.mesh.triangulate_polygons`;
+PLY triangle strips are read as their triangles, and PLY properties hamsa does not use (texture coordinates
+of a face's corners, other elements) are skipped.
 Files are read and written through :mod:`hamsa.files`: only regular files, never more than its read
 limit (gzip included), and every writer goes through a temporary file and an atomic rename, so an
 interrupted write never leaves a half-written mesh behind.
@@ -555,18 +557,52 @@ def _require_properties(table: dict, names) -> None:
         raise MeshError(f"PLY vertex element lacks properties {missing}")
 
 
+_PLY_FACES = ("face", "tristrips")  # the elements that make triangles (a polygon per row / strips)
+
+
 def _face_list_index(element: dict) -> int:
     for i, p in enumerate(element["props"]):
         if p[1] == "list" and p[0] in ("vertex_indices", "vertex_index"):
             return i
-    raise MeshError("PLY face element lacks a 'vertex_indices' list")
+    raise MeshError(f"PLY {element['name']} element lacks a 'vertex_indices' list")
+
+
+def _ply_polygons(element: dict, lists: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The polygons of a face or tristrips element, as :func:`_off_polygons` gives them, from its vertex index
+    lists ``(lengths (m,), indices concatenated)``."""
+    counts, corners = lists[0].astype(np.int64), _integer_faces(lists[1].reshape(-1, 1), "face").ravel()
+    return (counts, corners) if element["name"] == "face" else _strip_triangles(counts, corners)
+
+
+def _strip_triangles(counts: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3s, corners) of the triangles of PLY triangle strips: each list holds strips separated by -1, and strip
+    a b c d e ... gives (a b c), (c b d), (c d e), ...: every other triangle with its first two corners swapped,
+    so all face one way. Triangles with a repeated corner (where a strip turns) are left out."""
+    triangles = [np.zeros((0, 3), dtype=np.int64)]
+    for strips in np.split(corners, np.cumsum(counts)[:-1]):
+        for strip in np.split(strips, np.flatnonzero(strips < 0)):
+            strip = strip[strip >= 0]
+            run = np.stack([strip[:-2], strip[1:-1], strip[2:]], axis=1)
+            run[1::2, :2] = run[1::2, 1::-1]
+            triangles.append(run)
+    run = np.concatenate(triangles)
+    run = run[(run[:, 0] != run[:, 1]) & (run[:, 1] != run[:, 2]) & (run[:, 0] != run[:, 2])]
+    return np.full(len(run), 3, dtype=np.int64), run.ravel()
+
+
+def _joined(polygons: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The polygons of several face / tristrips elements as one ``(counts, corners)``; None when there are none."""
+    if not polygons:
+        return None
+    return np.concatenate([p[0] for p in polygons]), np.concatenate([p[1] for p in polygons])
 
 
 def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarray], tuple | None]:
-    """({property name: column} of the vertex element, the faces as :func:`_off_polygons` gives them)."""
+    """({property name: column} of the vertex element, the faces as :func:`_off_polygons` gives them, None when
+    there is no face or tristrips element)."""
     lines = [line for line in text.splitlines() if line.strip()]
     pos = 0
-    vertices = faces = None
+    vertices, polygons = None, []
     for element in elements:
         rows = lines[pos : pos + element["count"]]
         if len(rows) < element["count"]:
@@ -581,69 +617,103 @@ def _read_ply_ascii(text: str, elements: list[dict]) -> tuple[dict[str, np.ndarr
                 p[0]: table[:, i] if p[1].startswith("f") else table[:, i].astype(p[1])
                 for i, p in enumerate(element["props"])
             }
-        elif element["name"] == "face":
-            if _face_list_index(element) != 0:
-                raise MeshError("ASCII PLY faces must start with the vertex index list")
-            faces = _off_polygons(rows)
-    return vertices, faces
+        elif element["name"] in _PLY_FACES:
+            counts, corners = _off_polygons(_from_index_list(rows, element))
+            polygons.append(_ply_polygons(element, (counts, corners)))
+    return vertices, _joined(polygons)
+
+
+def _from_index_list(rows: list[str], element: dict) -> list[str]:
+    """The ASCII rows of a face element from its vertex index list on (the properties before it dropped)."""
+    before = element["props"][: _face_list_index(element)]
+    if not before:
+        return rows
+    cut = []
+    for row in rows:
+        tokens, at = row.split(), 0
+        for p in before:
+            at += 1 + (int(tokens[at]) if p[1] == "list" else 0)
+        cut.append(" ".join(tokens[at:]))
+    return cut
 
 
 def _read_ply_binary(body: bytes, elements: list[dict], order: str) -> tuple[dict[str, np.ndarray], tuple | None]:
-    """({property name: column} of the vertex element, the faces as :func:`_ply_binary_polygons` gives them)."""
+    """({property name: column} of the vertex element, the faces as :func:`_off_polygons` gives them, None when
+    there is no face or tristrips element)."""
     pos = 0
-    vertices = faces = None
+    vertices, polygons = None, []
     for element in elements:
-        count = element["count"]
-        if element["name"] == "face":
-            faces, size = _ply_binary_polygons(body, element, order, pos)
-            pos += size
-            continue
-        if any(p[1] == "list" for p in element["props"]):
-            raise MeshError(f"binary PLY element '{element['name']}' with list properties is not supported")
-        dtype = np.dtype([(p[0], order + p[1]) for p in element["props"]])
-        table = _frombuffer(body, dtype, count, pos, element["name"])
+        columns, size = _ply_binary_element(body, element, order, pos)
+        pos += size
         if element["name"] == "vertex":
-            vertices = {p[0]: table[p[0]] for p in element["props"]}
-        pos += dtype.itemsize * count
-    return vertices, faces
+            if any(p[1] == "list" for p in element["props"]):
+                raise MeshError("PLY vertex element with list properties is not supported")
+            vertices = columns
+        elif element["name"] in _PLY_FACES:
+            polygons.append(_ply_polygons(element, columns[element["props"][_face_list_index(element)][0]]))
+    return vertices, _joined(polygons)
 
 
-def _ply_binary_polygons(body: bytes, element: dict, order: str, pos: int) -> tuple[tuple, int]:
-    """((corner counts (m,), corners concatenated), bytes read) of a binary PLY face element at ``pos``.
-    Records have one size when every face has as many corners as the first (one read); otherwise they are
-    read one by one."""
-    props, count = element["props"], element["count"]
-    list_at = _face_list_index(element)
-    if any(p[1] == "list" for i, p in enumerate(props) if i != list_at):
-        raise MeshError("binary PLY faces with several list properties are not supported")
-    records: dict[int, np.dtype] = {}
+def _ply_binary_element(body: bytes, element: dict, order: str, pos: int) -> tuple[dict, int]:
+    """({property name: (count,) column, or (lengths (count,), values concatenated) for a list property}, bytes
+    read) of a binary PLY element at ``pos``. Read at once when every record's lists are as long as the first
+    record's (a triangle mesh's faces); otherwise record by record."""
+    props, count, name = element["props"], element["count"], element["name"]
+    lists = [p[0] for p in props if p[1] == "list"]
+    records: dict[tuple, np.dtype] = {}
 
-    def record(corners: int) -> np.dtype:
-        if corners not in records:
-            fields = [(p[0], order + p[1]) for p in props[:list_at]]
-            fields += [("n", order + props[list_at][2]), ("idx", order + props[list_at][3], (corners,))]
-            records[corners] = np.dtype(fields + [(p[0], order + p[1]) for p in props[list_at + 1 :]])
-        return records[corners]
+    def record(lengths: tuple) -> np.dtype:  # the record whose list properties have these lengths
+        if lengths not in records:
+            fields, given = [], iter(lengths)
+            for p in props:
+                if p[1] == "list":
+                    fields += [(p[0] + " length", order + p[2]), (p[0], order + p[3], (next(given),))]
+                else:
+                    fields.append((p[0], order + p[1]))
+            records[lengths] = np.dtype(fields)
+        return records[lengths]
 
-    def corners_at(at: int) -> int:
-        return int(_frombuffer(body, record(0), 1, at, "face")["n"][0])
+    # (struct format of the list length or None, bytes of the length or the scalar, bytes of a list value)
+    layout = [
+        (order + np.dtype(p[2]).char, np.dtype(p[2]).itemsize, np.dtype(p[3]).itemsize)
+        if p[1] == "list"
+        else (None, np.dtype(p[1]).itemsize, 0)
+        for p in props
+    ]
 
-    if count == 0:
-        return (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)), 0
-    first = corners_at(pos)
+    def lengths_at(at: int) -> tuple:  # the list lengths of the record at ``at``
+        lengths = []
+        for length_format, size, value_size in layout:
+            if length_format is not None:
+                if at + size > len(body):
+                    raise MeshError(f"PLY file is truncated inside the '{name}' element")
+                length = struct.unpack_from(length_format, body, at)[0]
+                if length < 0:
+                    raise MeshError(f"a '{name}' record has a list of {length} values")
+                lengths.append(length)
+                at += length * value_size
+            at += size
+        return tuple(lengths)
+
+    first = lengths_at(pos) if count and lists else (0,) * len(lists)
     size = record(first).itemsize * count
-    if len(body) >= pos + size:
+    if len(body) >= pos + size:  # one read when every record is as long as the first
         table = np.frombuffer(body, dtype=record(first), count=count, offset=pos)
-        if np.all(table["n"] == first):
-            return (np.full(count, first, dtype=np.int64), table["idx"].astype(np.int64).ravel()), size
-    counts, corners, at = np.empty(count, dtype=np.int64), [], pos
-    for face in range(count):  # polygons of several sizes: records of several lengths
-        counts[face] = corners_at(at)
-        if counts[face] < 0:
-            raise MeshError(f"face {face} has {counts[face]} vertices")
-        corners.append(_frombuffer(body, record(int(counts[face])), 1, at, "face")["idx"].ravel())
-        at += record(int(counts[face])).itemsize
-    return (counts, np.concatenate(corners).astype(np.int64)), at - pos
+        lengths = np.stack([table[n + " length"] for n in lists], axis=1).astype(np.int64) if lists else None
+        if not lists or np.all(lengths == first):
+            columns = {p[0]: table[p[0]] for p in props if p[1] != "list"}
+            return columns | {n: (lengths[:, j], table[n].reshape(-1)) for j, n in enumerate(lists)}, size
+    if not lists:
+        raise MeshError(f"PLY file is truncated inside the '{name}' element")
+    rows, lengths, at = [], [], pos
+    for _ in range(count):  # lists of several lengths: records of several sizes
+        lengths.append(lengths_at(at))
+        rows.append(_frombuffer(body, record(lengths[-1]), 1, at, name)[0])
+        at += record(lengths[-1]).itemsize
+    columns = {p[0]: np.array([row[p[0]] for row in rows]) for p in props if p[1] != "list"}
+    for j, n in enumerate(lists):
+        columns[n] = (np.array(lengths, dtype=np.int64)[:, j], np.concatenate([np.ravel(row[n]) for row in rows]))
+    return columns, at - pos
 
 
 def _frombuffer(body: bytes, dtype: np.dtype, count: int, pos: int, what: str) -> np.ndarray:
