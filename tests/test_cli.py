@@ -213,3 +213,53 @@ def test_modes_and_optimize_take_a_point_file(tmp_path):
     assert main(["optimize", str(points), "-k", "5", "-m", "30", "--iterations", "5", "-o", str(potential)]) == 0
     assert np.load(potential).shape == (len(np.load(points)),)
     assert main(["compress", str(points), "-k", "5", "-o", str(tmp_path / "c.hmz")]) == 2
+
+
+def test_signature_gives_the_spheres_analytic_hks_and_wks(tmp_path, capsys):
+    """On the unit sphere HKS(x, t) = sum_l (2l + 1) exp(-l(l + 1) t) / 4 pi at every vertex, the HKS scaled
+    by the heat trace and the WKS are 1 / area; a saved --basis gives the same array; --repair writes a row
+    per input vertex, NaN at the dropped one."""
+    from hamsa.diffusion import default_hks_times
+
+    sphere = shapes.icosphere(4)
+    path, basis = tmp_path / "sphere.off", tmp_path / "basis.npz"
+    hamsa.save_mesh(sphere, path)
+    assert main(["signature", str(path), "-k", "36", "--count", "8", "-o", str(tmp_path / "hks.npy")]) == 0
+    times = default_hks_times(hamsa.eigenbasis(sphere, 36), 8)
+    degree = np.arange(6)[:, None]  # l <= 5: the 36 pairs
+    expected = ((2 * degree + 1) * np.exp(-degree * (degree + 1) * times)).sum(axis=0) / (4 * np.pi)
+    hks = np.load(tmp_path / "hks.npy")
+    assert hks.shape == (sphere.n_vertices, 8) and np.abs(hks / expected - 1).max() < 0.02
+    assert main(["basis", str(path), "-k", "36", "-q", "-o", str(basis)]) == 0
+    for kind in ("--scaled", "wks"):
+        options = ["--scaled"] if kind == "--scaled" else ["--kind", "wks"]
+        output = tmp_path / f"{kind.strip('-')}.npy"
+        assert main(["signature", str(path), "--basis", str(basis), *options, "-o", str(output)]) == 0
+        assert np.abs(np.load(output) * sphere.area - 1).max() < 0.03, kind
+    loose = tmp_path / "loose.off"
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], sphere.vertices]), sphere.faces + 1), loose)
+    assert main(["signature", str(loose), "--repair", "-k", "36", "--count", "8", "-o", str(tmp_path / "r.npy")]) == 0
+    repaired = np.load(tmp_path / "r.npy")
+    assert np.isnan(repaired[0]).all() and np.abs(repaired[1:] / expected - 1).max() < 0.02
+    assert "NaN at the 1 --repair dropped" in capsys.readouterr().out
+    assert main(["signature", str(path), "--basis", str(basis), "--potential", "eigsum:1-4", "-o", str(output)]) == 2
+    assert "--potential is for a basis computed here" in capsys.readouterr().err
+
+
+def test_segment_cuts_the_sphere_into_hemispheres(tmp_path, capsys):
+    """The nodal domains of the sphere's first nonconstant eigenfunction (linear in the coordinates) are two
+    hemispheres; --repair writes -1 at the dropped vertex; an index beyond -k is refused."""
+    sphere = shapes.icosphere(4)
+    loose = tmp_path / "loose.off"
+    hamsa.save_mesh(hamsa.TriMesh(np.vstack([[9.0, 9.0, 9.0], sphere.vertices]), sphere.faces + 1), loose)
+    assert main(["segment", str(loose), "--repair", "--index", "1", "-o", str(tmp_path / "s.npy")]) == 0
+    labels = np.load(tmp_path / "s.npy")
+    assert labels[0] == -1 and labels.dtype == np.int64
+    sizes = np.bincount(labels[1:])
+    assert len(sizes) == 2 and sizes.min() > 0.45 * sphere.n_vertices
+    direction = np.linalg.lstsq(sphere.vertices, np.where(labels[1:] == 0, -1.0, 1.0), rcond=None)[0]
+    sides = np.sign(sphere.vertices @ direction)  # the plane through the centre that the nodal line follows
+    assert np.mean(sides == np.where(labels[1:] == 0, -1.0, 1.0)) > 0.99
+    assert "2 segments from eigenfunction 1" in capsys.readouterr().out
+    assert main(["segment", str(loose), "--index", "5", "-k", "3", "-o", str(tmp_path / "t.npy")]) == 2
+    assert "--index 5 needs at least k = 6" in capsys.readouterr().err

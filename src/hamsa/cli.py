@@ -38,6 +38,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
 def _nonnegative_float(text: str) -> float:
     try:
         value = float(text)
@@ -89,6 +99,16 @@ class _Loaded(NamedTuple):
     mesh: object
     vertex_ids: np.ndarray | None
     input_vertices: int
+
+
+def _add_basis_options(command, k: int | None) -> None:
+    """--repair, -k, --potential and --basis of a command that works on an eigenbasis (:func:`_basis_for`);
+    ``k`` the default of -k (None: the least the command needs)."""
+    command.add_argument("--repair", action="store_true", help=REPAIR_HELP + " (as when --basis was computed)")
+    default = f"default {k}" if k else "default: as many as the command needs"
+    command.add_argument("-k", type=_positive_int, default=k, help=f"eigenpairs computed ({default})")
+    command.add_argument("--potential", help=POTENTIAL_HELP)
+    command.add_argument("--basis", help="use a saved basis (.npz of hamsa basis) of MESH instead of computing one")
 
 
 def _add_cloud_options(command) -> None:
@@ -485,6 +505,42 @@ def _parser() -> argparse.ArgumentParser:
     view.add_argument("-o", "--output", required=True, help="output .html (self-contained, opens offline)")
     _add_cloud_options(view)
 
+    signature = commands.add_parser(
+        "signature", help="heat or wave kernel signatures (HKS / WKS) of every vertex, saved as .npy"
+    )
+    signature.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
+    signature.add_argument("--kind", choices=("hks", "wks"), default="hks", help="default hks")
+    signature.add_argument(
+        "--count",
+        type=_positive_int,
+        default=100,
+        help="time scales (hks: geometric over the spectrum, Sun et al.) or log-energies (wks: Aubry et al.) "
+        "(default 100)",
+    )
+    signature.add_argument(
+        "--scaled", action="store_true", help="hks: each time's column divided by the heat trace (across shapes)"
+    )
+    _add_basis_options(signature, 100)
+    signature.add_argument("-o", "--output", required=True, help="output .npy, (vertices, count)")
+    _add_cloud_options(signature)
+
+    segment = commands.add_parser(
+        "segment", help="segments of a mesh or point cloud: the nodal domains of one eigenfunction"
+    )
+    segment.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
+    segment.add_argument(
+        "--index", type=_nonnegative_int, required=True, help="the eigenfunction: its 0-based column in the basis"
+    )
+    segment.add_argument(
+        "--min-vertices",
+        type=_positive_int,
+        default=1,
+        help="smaller domains join the neighbouring segment they share most edges with (default 1: none)",
+    )
+    _add_basis_options(segment, None)
+    segment.add_argument("-o", "--output", required=True, help="output .npy of one segment label per vertex")
+    _add_cloud_options(segment)
+
     reproduce = commands.add_parser(
         "reproduce", help="run every experiment of the paper and write report/index.html + results.json"
     )
@@ -593,12 +649,12 @@ def _per_vertex(values: np.ndarray, loaded: _Loaded, what: str) -> np.ndarray:
     return values
 
 
-def _in_input_vertices(values: np.ndarray, loaded: _Loaded) -> np.ndarray:
-    """Per-vertex values of a repaired shape written per input vertex, NaN at the vertices the repair dropped
-    (:func:`_per_vertex` reads them back); values of a shape used as given are returned as they are."""
+def _in_input_vertices(values: np.ndarray, loaded: _Loaded, fill=np.nan) -> np.ndarray:
+    """Per-vertex values of a repaired shape written per input vertex, ``fill`` at the vertices the repair
+    dropped (:func:`_per_vertex` reads them back); values of a shape used as given are returned as they are."""
     if loaded.vertex_ids is None:
         return values
-    full = np.full((loaded.input_vertices, *values.shape[1:]), np.nan)
+    full = np.full((loaded.input_vertices, *values.shape[1:]), fill, dtype=np.result_type(values, fill))
     full[loaded.vertex_ids] = values
     return full
 
@@ -786,12 +842,7 @@ def _optimize(args) -> None:
         f"{len(result.history) - 1} iterations ({'plain' if args.plain else 'smoothed, then plain'}), "
         f"{time.perf_counter() - start:.1f} s"
     )
-    dropped = (
-        ""
-        if loaded.vertex_ids is None
-        else f" (one value per input vertex; NaN at the {loaded.input_vertices - mesh.n_vertices} --repair dropped)"
-    )
-    print(f"wrote           {output}{dropped}")
+    print(f"wrote           {output}{_dropped(loaded, 'NaN')}")
 
 
 def _compress(args) -> None:
@@ -1144,7 +1195,6 @@ def _view_fields(args, shape: _Loaded) -> tuple[dict, str]:
     """The fields ``hamsa view`` shows ({title: (n,) array}) and what they are. Eigenfunctions are titled by
     their column in ``basis.vectors`` (0-based, as in Python); a constant first one is left out unless
     ``--constant``."""
-    from hamsa.eigen import Eigenbasis, eigenbasis
     from hamsa.files import load_npz
 
     n = shape.mesh.n_vertices
@@ -1163,18 +1213,7 @@ def _view_fields(args, shape: _Loaded) -> tuple[dict, str]:
         if modes.shape[0] != n:
             raise HamsaError(f"'{args.modes}': modes of shape {modes.shape}, the mesh has {n} vertices{_REPAIR_HINT}")
         return {f"mode {j}": modes[:, j] for j in range(min(args.k, modes.shape[1]))}, "compressed modes"
-    potential = _potential(args.potential, shape)
-    if args.basis:
-        basis = Eigenbasis.load(args.basis)
-        same_ids = basis.vertex_ids is None or (
-            shape.vertex_ids is not None and np.array_equal(basis.vertex_ids, shape.vertex_ids)
-        )
-        if basis.n != n or not same_ids:
-            raise HamsaError(f"'{args.basis}' has {basis.n} rows, not those of the mesh's {n} vertices{_REPAIR_HINT}")
-        kind = f"basis {Path(args.basis).name}"
-    else:
-        basis = eigenbasis(shape.mesh, args.k + 1, potential)  # one more: the constant is skipped
-        kind = "LBO" if potential is None else "Hamiltonian"
+    basis, potential, kind = _basis_for(args, shape, args.k + 1)  # one more: the constant is skipped
     vectors, first = basis.vectors, 0
     if not args.constant and np.ptp(vectors[:, 0]) <= 1e-8 * np.abs(vectors[:, 0]).max():
         first = 1  # the constant eigenfunction of V = 0 (Neumann): nothing to see
@@ -1185,6 +1224,95 @@ def _view_fields(args, shape: _Loaded) -> tuple[dict, str]:
 
 
 _REPAIR_HINT = " (computed with --repair? then pass --repair here too)"
+
+
+def _basis_for(args, shape: _Loaded, k: int, progress=None):
+    """(basis, potential or None, what the basis is) of a command with ``--basis`` / ``--potential``: the saved
+    basis, its rows checked against the shape's vertices (repaired as it was), or the ``k`` smallest
+    eigenpairs of the shape with the potential, computed here (``progress`` as :func:`hamsa.eigen.eigenbasis`'s)."""
+    from hamsa.eigen import Eigenbasis, eigenbasis
+
+    if args.basis and args.potential:
+        raise HamsaError("--potential is for a basis computed here: a saved --basis has its own")
+    if not args.basis:
+        potential = _potential(args.potential, shape)
+        basis = eigenbasis(shape.mesh, k, potential, progress=progress)
+        return basis, potential, "LBO" if potential is None else "Hamiltonian"
+    basis, n = Eigenbasis.load(args.basis), shape.mesh.n_vertices
+    same_ids = basis.vertex_ids is None or (
+        shape.vertex_ids is not None and np.array_equal(basis.vertex_ids, shape.vertex_ids)
+    )
+    if basis.n != n or not same_ids:
+        raise HamsaError(f"'{args.basis}' has {basis.n} rows, not those of the mesh's {n} vertices{_REPAIR_HINT}")
+    return basis, None, f"basis {Path(args.basis).name}"
+
+
+def _signature(args) -> None:
+    from hamsa.diffusion import (
+        default_hks_times,
+        default_wks_energies,
+        heat_kernel_signature,
+        wave_kernel_signature,
+    )
+    from hamsa.files import atomic_write
+
+    output = _output_path(args, ".npy", args.mesh, args.basis, _potential_file(args.potential))
+    if args.scaled and args.kind != "hks":
+        raise HamsaError("--scaled is for --kind hks (the heat trace)")
+    with _Steps(args, 3) as step:
+        step(f"reading {Path(args.mesh).name}")
+        shape = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
+        _check_cloud_options(args, shape.mesh)
+        step("loading the basis" if args.basis else f"solving for {args.k} eigenpairs")
+        basis, _, kind = _basis_for(args, shape, args.k, step.counter("eigenpairs converged"))
+        step(f"{args.kind.upper()} at {args.count} scales")
+        if args.kind == "hks":
+            scales = default_hks_times(basis, args.count)
+            values = heat_kernel_signature(basis, scales, scaled=args.scaled)
+            what = f"times {scales[0]:.4g} .. {scales[-1]:.4g}{' (scaled by the heat trace)' if args.scaled else ''}"
+        else:
+            scales, sigma = default_wks_energies(basis, args.count)
+            values = wave_kernel_signature(basis, scales, sigma)
+            what = f"log-energies {scales[0]:.4g} .. {scales[-1]:.4g}, sigma {sigma:.4g}"
+        saved = _in_input_vertices(values, shape)
+        with atomic_write(output) as handle:
+            np.save(handle, saved)
+    print(f"{args.kind.upper()} of the {kind} (k = {basis.k}): {what}")
+    print(f"wrote           {output} {saved.shape}{_dropped(shape, 'NaN')}")
+
+
+def _segment(args) -> None:
+    from hamsa.files import atomic_write
+    from hamsa.nodal import segment
+
+    output = _output_path(args, ".npy", args.mesh, args.basis, _potential_file(args.potential))
+    k = args.k or args.index + 1
+    if args.index >= k:
+        raise HamsaError(f"--index {args.index} needs at least k = {args.index + 1} eigenpairs, -k is {k}")
+    with _Steps(args, 3) as step:
+        step(f"reading {Path(args.mesh).name}")
+        shape = _load_for_operators(args.mesh, args.repair, cloud=_cloud_options(args))
+        _check_cloud_options(args, shape.mesh)
+        step("loading the basis" if args.basis else f"solving for {k} eigenpairs")
+        basis, _, kind = _basis_for(args, shape, k, step.counter("eigenpairs converged"))
+        step("nodal domains")
+        labels = segment(shape.mesh, basis, args.index, args.min_vertices)
+        saved = _in_input_vertices(labels, shape, fill=-1)
+        with atomic_write(output) as handle:
+            np.save(handle, saved)
+    sizes = np.bincount(labels)
+    print(
+        f"{len(sizes)} segments from eigenfunction {args.index} of the {kind} (E = {basis.values[args.index]:.6g}), "
+        f"{sizes.min()} .. {sizes.max()} vertices each"
+    )
+    print(f"wrote           {output}{_dropped(shape, '-1')}")
+
+
+def _dropped(shape: _Loaded, fill: str) -> str:
+    """What an output written per input vertex holds at the vertices --repair dropped ("" without a repair)."""
+    if shape.vertex_ids is None:
+        return ""
+    return f" (one row per input vertex; {fill} at the {shape.input_vertices - shape.mesh.n_vertices} --repair dropped)"
 
 
 def _reproduce(args) -> None:
@@ -1284,6 +1412,8 @@ def main(argv: list[str] | None = None) -> int:
         "modes": _modes,
         "match": _match,
         "view": _view,
+        "signature": _signature,
+        "segment": _segment,
         "benchmark-matching": _benchmark_matching,
         "reproduce": _reproduce,
         "demo": _demo,
