@@ -312,3 +312,19 @@ def test_ply_triangle_strips_are_read(tmp_path):
         normals = np.cross(b - a, c - a)[:, 2]
         assert mesh.n_faces == 50 and (np.all(normals > 0) or np.all(normals < 0)), name
         assert np.isclose(mesh.area, 25.0) and mesh.is_consistently_oriented, name
+
+
+def test_text_files_with_a_byte_order_mark_read_as_without(tmp_path, mesh):
+    """Windows editors start UTF-8 text with a byte-order mark: the OBJ reader took that first line for no
+    vertex (so every face pointed one vertex off), OFF refused its header, XYZ its first number."""
+    from hamsa.files import read_text
+
+    np.savetxt(tmp_path / "p.xyz", mesh.vertices)
+    for name in ("m.obj", "m.off", "p.xyz"):
+        if name != "p.xyz":
+            hamsa.save_mesh(mesh, tmp_path / name)
+        (tmp_path / f"bom_{name}").write_bytes(b"\xef\xbb\xbf" + (tmp_path / name).read_bytes())
+        plain, marked = (hamsa.io.read_shape_arrays(tmp_path / f) for f in (name, f"bom_{name}"))
+        np.testing.assert_array_equal(marked[0], plain[0], err_msg=name)
+        assert (marked[1] is None and plain[1] is None) or np.array_equal(marked[1], plain[1]), name
+    assert read_text(tmp_path / "bom_p.xyz") == read_text(tmp_path / "p.xyz")

@@ -106,12 +106,13 @@ def read_bytes(path: str | os.PathLike, *, limit: int | None = None, decompress:
 
 
 def read_text(path: str | os.PathLike, *, limit: int | None = None) -> str:
-    """The content of a UTF-8 text file, read like :func:`read_bytes`; a binary file (an array, an archive,
+    """The content of a UTF-8 text file (without the byte-order mark some editors write first), read like
+    :func:`read_bytes`; a binary file (an array, an archive,
     anything with NUL bytes or invalid UTF-8) is refused with a FileAccessError that says what it looks like."""
     data = read_bytes(path, limit=limit)
     kind = next((name for magic, name in _BINARY_MAGIC.items() if data.startswith(magic)), None)
     try:
-        text = None if kind or b"\0" in data else data.decode("utf-8")
+        text = None if kind or b"\0" in data else data.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = None
     if text is None:

@@ -158,7 +158,7 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
             if points.shape[1] < 3:
                 raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
             return np.asarray(points[:, :3], dtype=np.float64), None
-        text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8")
+        text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8-sig")
         lines = [line.replace(",", " ") for line in _data_lines(text)]
         if not lines:
             raise MeshError("no points in the file")
@@ -395,7 +395,7 @@ def _read_off(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def _off_parts(data: bytes) -> tuple[str, list[str], list[str]]:
     """(variant: OFF / COFF / NOFF / CNOFF, vertex lines, face lines) of an OFF file."""
-    lines = _data_lines(data.decode("utf-8"))
+    lines = _data_lines(data.decode("utf-8-sig"))
     if not lines:
         raise MeshError("no OFF header")
     header = lines[0].split()
@@ -457,7 +457,7 @@ def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]], list[str]]:
     """(the text after 'v ' of each vertex line, the tokens after 'f ' of each face line, the text after 'vn '
     of each normal line) of an OBJ file."""
     vertex_lines, face_lines, normal_lines = [], [], []
-    for raw in data.decode("utf-8").splitlines():
+    for raw in data.decode("utf-8-sig").splitlines():
         line = raw.split("#", 1)[0].strip()
         if line.startswith("v "):
             vertex_lines.append(line[2:])
