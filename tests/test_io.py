@@ -328,3 +328,13 @@ def test_text_files_with_a_byte_order_mark_read_as_without(tmp_path, mesh):
         np.testing.assert_array_equal(marked[0], plain[0], err_msg=name)
         assert (marked[1] is None and plain[1] is None) or np.array_equal(marked[1], plain[1]), name
     assert read_text(tmp_path / "bom_p.xyz") == read_text(tmp_path / "p.xyz")
+
+
+def test_obj_lines_separated_by_tabs(tmp_path, mesh):
+    """'v\t1\t2\t3' is a vertex line as 'v 1 2 3' is (the reader looked for 'v ' and skipped it)."""
+    hamsa.save_mesh(mesh, tmp_path / "m.obj")
+    text = (tmp_path / "m.obj").read_text().replace("v ", "v\t").replace("f ", "f\t")
+    (tmp_path / "tab.obj").write_text(text)
+    tabbed = hamsa.load_mesh(tmp_path / "tab.obj")
+    np.testing.assert_array_equal(tabbed.vertices, mesh.vertices)
+    np.testing.assert_array_equal(tabbed.faces, mesh.faces)

@@ -458,13 +458,13 @@ def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]], list[str]]:
     of each normal line) of an OBJ file."""
     vertex_lines, face_lines, normal_lines = [], [], []
     for raw in data.decode("utf-8-sig").splitlines():
-        line = raw.split("#", 1)[0].strip()
-        if line.startswith("v "):
-            vertex_lines.append(line[2:])
-        elif line.startswith("f "):
-            face_lines.append(line[2:].split())
-        elif line.startswith("vn "):
-            normal_lines.append(line[3:])
+        keyword, *rest = raw.split("#", 1)[0].split(None, 1) or [""]  # 'v 1 2 3' or 'v\t1\t2\t3'
+        if keyword == "v":
+            vertex_lines.append(rest[0] if rest else "")
+        elif keyword == "f":
+            face_lines.append(rest[0].split() if rest else [])
+        elif keyword == "vn":
+            normal_lines.append(rest[0] if rest else "")
     if not vertex_lines:
         raise MeshError("no vertices ('v x y z' lines)")
     return vertex_lines, face_lines, normal_lines
