@@ -338,3 +338,30 @@ def test_obj_lines_separated_by_tabs(tmp_path, mesh):
     tabbed = hamsa.load_mesh(tmp_path / "tab.obj")
     np.testing.assert_array_equal(tabbed.vertices, mesh.vertices)
     np.testing.assert_array_equal(tabbed.faces, mesh.faces)
+
+
+def test_text_point_files_as_scanners_and_cloudcompare_write_them(tmp_path):
+    """A PTS file's point counts (one block or several; a wrong count refused), a first line naming the
+    columns (CloudCompare's '//X Y Z Nx Ny Nz', 'x y z', columns in any order in a ';' separated .csv): the
+    points, and the named normals, are the ones written."""
+    points = shapes.icosphere(2).vertices
+    normals = points / np.linalg.norm(points, axis=1, keepdims=True)
+    rows = [f"{x} {y} {z} 100 20 30 40" for x, y, z in points]  # x y z intensity r g b
+    files = {
+        "one.pts": [str(len(rows)), *rows],
+        "two.pts": ["100", *rows[:100], str(len(rows) - 100), *rows[100:]],
+        "cc.txt": ["//X Y Z Nx Ny Nz", *(" ".join(map(str, [*p, *q])) for p, q in zip(points, normals))],
+        "named.xyz": ["x y z", *(" ".join(map(str, p)) for p in points)],
+        "columns.csv": ["r;g;b;X;Y;Z", *(";".join(map(str, [1, 2, 3, *p])) for p in points)],
+    }
+    for name, lines in files.items():
+        (tmp_path / name).write_text("\n".join(lines) + "\n")
+        read, _, given = hamsa.io.read_shape_arrays(tmp_path / name)
+        np.testing.assert_array_equal(read, points, err_msg=name)
+        if name == "cc.txt":
+            np.testing.assert_array_equal(given, normals)
+        else:
+            assert given is None, name
+    (tmp_path / "short.pts").write_text("\n".join([str(len(rows) + 5), *rows]))
+    with pytest.raises(MeshError, match="block at data line 1 promises 167 points and has fewer"):
+        hamsa.io.read_point_array(tmp_path / "short.pts")

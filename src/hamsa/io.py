@@ -28,7 +28,7 @@ from hamsa.mesh import TriMesh, triangulate_polygons
 from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 
 FORMATS = ("off", "obj", "ply", "stl")
-POINTS_ONLY = ("xyz", "pts", "txt", "npy")  # formats that hold points and never faces
+POINTS_ONLY = ("xyz", "pts", "txt", "csv", "npy")  # formats that hold points and never faces
 POINT_FORMATS = (*POINTS_ONLY, "off", "obj", "ply")
 
 
@@ -107,9 +107,11 @@ def load_point_cloud(
     repair: bool = False,
     file_normals: bool = True,
 ) -> PointCloud:
-    """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` (one point per line, x y z first, separated by spaces
-    or commas; further columns are ignored but normals, below), ``.npy`` ((n, 3) or wider), or the
-    vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
+    """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` / ``.csv`` (one point per line, separated by spaces,
+    commas or semicolons: x y z first, or the columns a first line names, such as ``x,y,z,nx,ny,nz`` or
+    CloudCompare's ``//X Y Z``; a PTS file's point-count lines are checked and skipped; further columns are
+    ignored but normals, below), ``.npy`` ((n, 3) or wider), or the vertices of an ``.off`` / ``.obj`` /
+    ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
 
     Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
     :class:`~hamsa.pointcloud.PointCloud`. The normals the file holds (:func:`read_vertex_normals`) are the
@@ -147,7 +149,8 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
     fmt = point_format(path)
     if fmt is None:
         raise MeshError(
-            f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .npy .off .obj .ply (optionally .gz)"
+            f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .csv .npy .off .obj .ply (optionally "
+            ".gz)"
         )
     kind, gzipped = fmt
     if kind in ("off", "obj", "ply"):
@@ -159,15 +162,64 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
                 raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
             return np.asarray(points[:, :3], dtype=np.float64), None
         text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8-sig")
-        lines = [line.replace(",", " ") for line in _data_lines(text)]
-        if not lines:
-            raise MeshError("no points in the file")
-        table = _fixed_width(lines, 3, "point", spare=3 if normals else 0)
-        return table[:, :3], _unit_rows(table[:, 3:])
+        return _point_table(text, normals, counted=kind == "pts")
     except FileAccessError as exc:
         raise MeshError(str(exc)) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
+
+
+_NAMED_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
+
+
+def _point_table(text: str, normals: bool, counted: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """(points, normals or None) of a text point file: one point per line, numbers separated by spaces, commas
+    or semicolons. A first line that is not numbers names the columns (``x y z nx ny nz``, ``//X,Y,Z``, any
+    case): x y z and the normals are read from the columns so named; otherwise x y z are the first three
+    columns and the normals columns 4-6 when they are unit vectors (:func:`_unit_rows`). ``counted`` (PTS):
+    a line holding one integer gives the number of points of the block that follows."""
+    lines = [line.replace(",", " ").replace(";", " ") for line in _data_lines(text)]
+    names = None
+    if lines and not _numbers(lines[0].split()):
+        names = [name.lower() for name in lines.pop(0).lstrip("/").split()]
+    if counted:
+        lines = _counted_blocks(lines)
+    if not lines:
+        raise MeshError("no points in the file")
+    if names is None or not {"x", "y", "z"} <= set(names):
+        table = _fixed_width(lines, 3, "point", spare=3 if normals else 0)
+        return table[:, :3], _unit_rows(table[:, 3:])
+    given = next((c for c in _NAMED_NORMALS if set(c) <= set(names)), None) if normals else None
+    columns = [names.index(c) for c in ("x", "y", "z", *(given or ()))]
+    table = _fixed_width(lines, max(columns) + 1, "point")[:, columns]
+    return table[:, :3], table[:, 3:] if given else None
+
+
+def _numbers(tokens: list[str]) -> bool:
+    try:
+        [float(token) for token in tokens]
+    except ValueError:
+        return False
+    return True
+
+
+def _counted_blocks(lines: list[str]) -> list[str]:
+    """The point lines of a PTS file: each block starts with a line holding its point count, checked here."""
+    points, at = [], 0
+    while at < len(lines):
+        count = lines[at].split()
+        if len(count) != 1:
+            if at == 0:
+                return lines  # a file without count lines
+            raise MeshError(f"data line {at + 1} should give the next block's point count, it has {len(count)} values")
+        if not count[0].isdigit():
+            raise MeshError(f"data line {at + 1} should be a point count, got '{count[0]}'")
+        block = lines[at + 1 : at + 1 + int(count[0])]
+        if len(block) < int(count[0]) or any(len(line.split()) == 1 for line in block):
+            raise MeshError(f"the PTS block at data line {at + 1} promises {count[0]} points and has fewer")
+        points += block
+        at += 1 + int(count[0])
+    return points
 
 
 def _unit_rows(columns: np.ndarray) -> np.ndarray | None:
