@@ -263,3 +263,37 @@ def test_segment_cuts_the_sphere_into_hemispheres(tmp_path, capsys):
     assert "2 segments from eigenfunction 1" in capsys.readouterr().out
     assert main(["segment", str(loose), "--index", "5", "-k", "3", "-o", str(tmp_path / "t.npy")]) == 2
     assert "--index 5 needs at least k = 6" in capsys.readouterr().err
+
+
+def test_repair_writes_the_repaired_mesh_or_cloud_and_its_input_ids(tmp_path, capsys):
+    """hamsa repair: a mesh with a loose vertex, three duplicate faces and a second piece comes out without them
+    (every piece kept with --all-pieces), its vertices the input's rows ids; a point file with a NaN and a
+    repeated point comes out without them, its normals kept; a wrong kind of output is refused unwritten."""
+    capsule, ball = shapes.capsule(n_around=16), shapes.icosphere(1)
+    vertices = np.vstack([[9.0, 9.0, 9.0], capsule.vertices, 0.3 * ball.vertices + 5])  # the smaller piece
+    faces = np.vstack([capsule.faces + 1, capsule.faces[:3] + 1, ball.faces + 1 + capsule.n_vertices])
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()] + [f"3 {a} {b} {c}" for a, b, c in faces]
+    (tmp_path / "in.off").write_text(f"OFF\n{len(vertices)} {len(faces)} 0\n" + "\n".join(rows) + "\n")
+    for options, pieces in (([], 1), (["--all-pieces"], 2)):
+        out, ids = tmp_path / f"out{len(options)}.off", tmp_path / f"ids{len(options)}.npy"
+        assert main(["repair", str(tmp_path / "in.off"), *options, "--ids", str(ids), "-o", str(out)]) == 0
+        mesh, kept = hamsa.load_mesh(out), np.load(ids)
+        np.testing.assert_array_equal(mesh.vertices, vertices[kept])
+        assert mesh.n_components == pieces and mesh.n_faces == capsule.n_faces + (pieces - 1) * ball.n_faces
+    assert "3 duplicate faces" in capsys.readouterr().out
+    points = shapes.icosphere(2).vertices
+    normals = points / np.linalg.norm(points, axis=1, keepdims=True)
+    table = np.vstack([np.hstack([points, normals]), [np.nan, 0, 0, 0, 0, 1], np.hstack([points[:1], normals[:1]])])
+    np.savetxt(tmp_path / "scan.xyz", table)
+    assert (
+        main(["repair", str(tmp_path / "scan.xyz"), "--ids", str(tmp_path / "p.npy"), "-o", str(tmp_path / "c.ply")])
+        == 0
+    )
+    cloud, kept = hamsa.load_point_cloud(tmp_path / "c.ply"), np.load(tmp_path / "p.npy")
+    np.testing.assert_array_equal(kept, np.arange(len(points)))
+    np.testing.assert_array_equal(cloud.points, points)
+    assert cloud.normals_origin == "given" and np.abs(cloud.normals - normals).max() < 1e-12
+    for source, target in (("in.off", "x.xyz"), ("scan.xyz", "x.off")):
+        assert main(["repair", str(tmp_path / source), "-o", str(tmp_path / target)]) == 2
+        assert not (tmp_path / target).exists()
+    assert "holds points: write .xyz" in capsys.readouterr().err

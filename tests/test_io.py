@@ -365,3 +365,26 @@ def test_text_point_files_as_scanners_and_cloudcompare_write_them(tmp_path):
     (tmp_path / "short.pts").write_text("\n".join([str(len(rows) + 5), *rows]))
     with pytest.raises(MeshError, match="block at data line 1 promises 167 points and has fewer"):
         hamsa.io.read_point_array(tmp_path / "short.pts")
+
+
+def test_point_clouds_are_written_and_read_back_exactly(tmp_path):
+    """save_point_cloud: the points to the last bit in every point format (gzipped too), and a cloud's given
+    normals in all but .npy (estimated ones are not written)."""
+    from hamsa.io import save_point_cloud
+
+    points = shapes.icosphere(2).vertices * [1.0, 2.0, 3.0] + 1e-3
+    normals = points + np.random.default_rng(0).normal(scale=0.1, size=points.shape)  # outward, not exact
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    given = hamsa.PointCloud(points, normals=normals)
+    for name in ("a.xyz", "a.txt.gz", "a.pts", "a.csv", "a.ply", "a.ply.gz", "a.npy"):
+        save_point_cloud(given, tmp_path / name)
+        read, _, read_normals = hamsa.io.read_shape_arrays(tmp_path / name)
+        np.testing.assert_array_equal(read, points, err_msg=name)
+        if name == "a.npy":
+            assert read_normals is None
+        else:
+            np.testing.assert_allclose(read_normals, normals, atol=1e-15, err_msg=name)
+    save_point_cloud(hamsa.PointCloud(points), tmp_path / "b.xyz")
+    assert hamsa.io.read_vertex_normals(tmp_path / "b.xyz") is None
+    with pytest.raises(MeshError, match="cannot tell the point-file format"):
+        save_point_cloud(given, tmp_path / "a.off")

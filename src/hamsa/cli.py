@@ -195,19 +195,10 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     from hamsa.pointcloud import PointCloud
 
     if repair:
-        from hamsa.io import read_shape_arrays
-        from hamsa.repair import repair_mesh
-
-        cloud = cloud or {"file_normals": True}
-        vertices, faces, normals = read_shape_arrays(path, normals=cloud["file_normals"])
-        if faces is None:
-            shape, kept, report = _repaired_cloud(vertices, normals, cloud, keep="largest")
-        else:
-            shape, kept, report = repair_mesh(vertices, faces, keep="largest")
-        if not report.changed:
-            return _Loaded(shape, None, len(vertices))
-        print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
-        return _Loaded(shape, kept, len(vertices))
+        repaired, report = _repaired_file(path, cloud or {"file_normals": True}, keep="largest")
+        if report.changed:
+            print(f"{path}: {report}; outputs give input vertex ids ('vertex_ids')")
+        return repaired
     tufted = laplacian == "tufted"
     mesh = load_shape(path, manifold=not tufted, **(cloud or {}))
     if not isinstance(mesh, PointCloud) and len(mesh.unreferenced_vertices):
@@ -218,6 +209,21 @@ def _load_for_operators(path: str, repair: bool, laplacian: str | None = None, c
     for warning in _unusual(mesh, tufted):
         print(f"warning: '{path}' {warning}", file=sys.stderr)
     return _Loaded(mesh, None, mesh.n_vertices)
+
+
+def _repaired_file(path: str, cloud: dict, keep: str):
+    """(the :class:`_Loaded` shape of ``path`` after :func:`hamsa.repair.repair_mesh` or, for a point file,
+    :func:`hamsa.repair.repair_point_cloud` with the :func:`_cloud_options` ``cloud``; the repair report).
+    ``vertex_ids`` is None when nothing changed."""
+    from hamsa.io import read_shape_arrays
+    from hamsa.repair import repair_mesh
+
+    vertices, faces, normals = read_shape_arrays(path, normals=cloud["file_normals"])
+    if faces is None:
+        shape, kept, report = _repaired_cloud(vertices, normals, cloud, keep=keep)
+    else:
+        shape, kept, report = repair_mesh(vertices, faces, keep=keep)
+    return _Loaded(shape, kept if report.changed else None, len(vertices)), report
 
 
 def _unusual(mesh, tufted: bool) -> list[str]:
@@ -265,6 +271,22 @@ def _parser() -> argparse.ArgumentParser:
     )
     info.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
     _add_cloud_options(info)
+
+    repair = commands.add_parser("repair", help="write a repaired copy of a mesh or point file, and its vertex ids")
+    repair.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
+    repair.add_argument(
+        "--all-pieces", action="store_true", help="keep every connected piece (default: the largest, as --repair)"
+    )
+    repair.add_argument(
+        "--ids", help="also write a .npy with the input vertex id of each output vertex (row i came from ids[i])"
+    )
+    repair.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output mesh (.off .obj .ply .stl) or, for a point file, points (.xyz .txt .pts .csv .ply .npy)",
+    )
+    _add_cloud_options(repair)
 
     basis = commands.add_parser("basis", help="compute the k smallest eigenpairs of W + A diag(V) and save them")
     basis.add_argument("mesh", help=f"mesh file (.off .obj .ply .stl, optionally .gz) or {POINTS_HELP}")
@@ -1247,6 +1269,42 @@ def _basis_for(args, shape: _Loaded, k: int, progress=None):
     return basis, None, f"basis {Path(args.basis).name}"
 
 
+def _repair(args) -> None:
+    from hamsa.files import atomic_write, check_output
+    from hamsa.io import mesh_format, point_format, save_mesh, save_point_cloud
+    from hamsa.mesh import TriMesh
+
+    output = _output_path(args, None, args.mesh)
+    ids = check_output(args.ids, suffix=".npy", inputs=[args.mesh, args.output]) if args.ids else None
+    if ids is not None and ids.resolve() == output.resolve():
+        raise HamsaError("--ids and -o name the same file")
+    points_format = point_format(output)
+    as_points = points_format is not None and points_format[0] not in ("off", "obj")
+    try:
+        as_mesh = bool(mesh_format(output))
+    except MeshError:
+        as_mesh = False
+    if not (as_mesh or as_points):
+        raise HamsaError(f"cannot tell the format of '{output}': a mesh .off .obj .ply .stl, points .xyz .txt .pts "
+                         ".csv .ply .npy (optionally .gz)")  # fmt: skip
+    if ids is not None and output.name.lower().removesuffix(".gz").endswith(".stl"):
+        raise HamsaError("STL does not keep the vertex order that --ids refers to: write .off, .obj or .ply")
+    repaired, report = _repaired_file(args.mesh, _cloud_options(args), keep="all" if args.all_pieces else "largest")
+    _check_cloud_options(args, repaired.mesh)
+    is_mesh = isinstance(repaired.mesh, TriMesh)
+    if not (as_mesh if is_mesh else as_points):
+        kind = "a mesh: write .off .obj .ply or .stl" if is_mesh else "points: write .xyz .txt .pts .csv .ply or .npy"
+        raise HamsaError(f"'{args.mesh}' holds {kind}, not '{output}'")
+    (save_mesh if is_mesh else save_point_cloud)(repaired.mesh, output)
+    kept = np.arange(repaired.input_vertices) if repaired.vertex_ids is None else repaired.vertex_ids
+    if ids is not None:
+        with atomic_write(ids) as handle:
+            np.save(handle, kept)
+    print(f"{args.mesh}: {report if report.changed else 'nothing to repair'}")
+    print(f"wrote           {output} ({repaired.mesh.n_vertices} of {repaired.input_vertices} vertices)" +
+          (f", {ids}" if ids else ""))  # fmt: skip
+
+
 def _signature(args) -> None:
     from hamsa.diffusion import (
         default_hks_times,
@@ -1405,6 +1463,7 @@ def main(argv: list[str] | None = None) -> int:
     command = "hamsa"
     handlers = {
         "info": _info,
+        "repair": _repair,
         "basis": _basis,
         "optimize": _optimize,
         "compress": _compress,

@@ -401,6 +401,38 @@ def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> None:
         handle.write(data)
 
 
+def save_point_cloud(cloud, path: str | os.PathLike) -> None:
+    """Write a point cloud (a :class:`~hamsa.pointcloud.PointCloud` or an (n, 3) array) to ``path``, atomically:
+    ``.xyz`` / ``.txt`` / ``.pts`` / ``.csv`` (one point per line, 17 significant digits: an exact float64
+    round trip; ``.csv`` with an ``x,y,z`` header), ``.ply`` (binary little-endian, float64) or ``.npy``;
+    ``.gz`` too but for ``.npy``. A cloud that was given normals keeps them (columns 4-6, ``nx ny nz``; not in
+    ``.npy``), so reading the file back gives the same cloud; estimated normals are not written."""
+    fmt = point_format(path)
+    if fmt is None or fmt[0] in ("off", "obj"):
+        raise MeshError(f"cannot tell the point-file format of '{path}': use .xyz .txt .pts .csv .ply .npy")
+    kind, gzipped = fmt
+    points = cloud.points if isinstance(cloud, PointCloud) else np.asarray(cloud, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise MeshError(f"points have shape {points.shape}, expected (n, 3)")
+    given = isinstance(cloud, PointCloud) and cloud.normals_origin != "estimated"
+    table = np.hstack([points, cloud.normals]) if given and kind != "npy" else points
+    names = ("x", "y", "z", "nx", "ny", "nz")[: table.shape[1]]
+    if kind == "npy":
+        with atomic_write(path) as handle:
+            np.save(handle, table)
+        return
+    if kind == "ply":
+        properties = "".join(f"property double {c}\n" for c in names)
+        header = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(table)}\n{properties}end_header\n"
+        data = header.encode() + table.astype("<f8").tobytes()
+    else:
+        separator = "," if kind == "csv" else " "
+        head = separator.join(names) + "\n" if kind == "csv" else ""
+        data = (head + _format_rows(table, separator.join(["%.17g"] * table.shape[1])) + "\n").encode()
+    with atomic_write(path) as handle:
+        handle.write(gzip.compress(data, mtime=0) if gzipped else data)
+
+
 # ------------------------------------------------------------------------------------ text
 def _data_lines(text: str) -> list[str]:
     lines = []
