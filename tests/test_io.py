@@ -1,5 +1,6 @@
 import gzip
 import os
+import struct
 
 import numpy as np
 import pytest
@@ -388,3 +389,50 @@ def test_point_clouds_are_written_and_read_back_exactly(tmp_path):
     assert hamsa.io.read_vertex_normals(tmp_path / "b.xyz") is None
     with pytest.raises(MeshError, match="cannot tell the point-file format"):
         save_point_cloud(given, tmp_path / "a.off")
+
+
+def _lzf_literals(data: bytes) -> bytes:
+    """``data`` LZF-encoded as literal runs only (a valid stream; the reader's back-references are tested
+    on their own)."""
+    return b"".join(bytes([len(data[i : i + 32]) - 1]) + data[i : i + 32] for i in range(0, len(data), 32))
+
+
+def test_pcd_point_clouds_as_pcl_writes_them(tmp_path):
+    """PCL's .pcd, ascii, binary and binary_compressed (fields stored one after another), with normals, a
+    curvature and an rgb field around them: the points and normals written (float32), NaN rows kept."""
+    from hamsa.io import _lzf_decompress
+
+    points = shapes.icosphere(2).vertices.astype("<f4")
+    points[7] = np.nan  # an organized cloud's invalid point
+    normals = (points / np.linalg.norm(points, axis=1, keepdims=True)).astype("<f4")
+    rgb = np.arange(len(points), dtype="<u4")
+    head = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z rgb normal_x normal_y normal_z curvature\nSIZE 4 4 4 4 4 4 4 4\n"
+            f"TYPE F F F U F F F F\nCOUNT 1 1 1 1 1 1 1 1\nWIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+            f"POINTS {len(points)}\nDATA ")  # fmt: skip
+    columns = [*points.T, rgb, *normals.T, np.zeros(len(points), "<f4")]
+    record = np.dtype([(f"c{i}", c.dtype) for i, c in enumerate(columns)])
+    rows = np.empty(len(points), record)
+    for i, c in enumerate(columns):
+        rows[f"c{i}"] = c
+    text = "\n".join(
+        " ".join(repr(float(v)) if j != 3 else str(int(v)) for j, v in enumerate(r)) for r in rows.tolist()
+    )
+    by_field = b"".join(c.tobytes() for c in columns)
+    files = {
+        "a.pcd": (head + "ascii\n" + text + "\n").encode(),
+        "b.pcd": (head + "binary\n").encode() + rows.tobytes(),
+        "c.pcd": (head + "binary_compressed\n").encode()
+        + struct.pack("<II", len(_lzf_literals(by_field)), len(by_field))
+        + _lzf_literals(by_field),
+    }
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+        read, _, read_normals = hamsa.io.read_shape_arrays(tmp_path / name)
+        np.testing.assert_array_equal(read, points.astype(np.float64), err_msg=name)
+        np.testing.assert_array_equal(read_normals, normals.astype(np.float64), err_msg=name)
+    # literals "ab"; 10 bytes from 2 back (7 << 5, one more length byte 1, offset 1: overlapping what it writes);
+    # 3 bytes from 12 back (1 << 5, offset 11)
+    assert _lzf_decompress(bytes([1]) + b"ab" + bytes([7 << 5, 1, 1, 1 << 5, 11]), 15) == b"ab" * 6 + b"aba"
+    (tmp_path / "d.pcd").write_bytes(files["b.pcd"][:-10])
+    with pytest.raises(MeshError, match="shorter than its POINTS"):
+        hamsa.io.read_point_array(tmp_path / "d.pcd")

@@ -89,7 +89,7 @@ ORIENTATION_HELP = (
     "symmetric shape's descriptors cannot), kept only where it gives the better oriented map; meshes' faces are "
     "oriented consistently first, point clouds' normals estimated (default 0; 0.03 is the measured weight)"
 )
-POINTS_HELP = "a point cloud (.xyz .pts .txt .csv .npy, or a .ply / .off / .obj without faces)"
+POINTS_HELP = "a point cloud (.xyz .pts .txt .csv .pcd .npy, or a .ply / .off / .obj without faces)"
 
 
 class _Loaded(NamedTuple):

@@ -1,5 +1,5 @@
-"""Reading and writing meshes (OFF, OBJ, PLY ASCII and binary, STL) and reading point clouds (XYZ, NPY,
-and the vertices of OFF / OBJ / PLY), optionally gzip-compressed.
+"""Reading and writing meshes (OFF, OBJ, PLY ASCII and binary, STL) and point clouds (XYZ / TXT / PTS / CSV,
+PLY, NPY; PCD and the vertices of OFF / OBJ read only), optionally gzip-compressed.
 
 The readers are our own, written for one promise: **vertex order is never changed** (ground-truth
 correspondences in TOSCA/SCAPE are vertex indices). STL is the exception by nature: it stores
@@ -28,7 +28,7 @@ from hamsa.mesh import TriMesh, triangulate_polygons
 from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 
 FORMATS = ("off", "obj", "ply", "stl")
-POINTS_ONLY = ("xyz", "pts", "txt", "csv", "npy")  # formats that hold points and never faces
+POINTS_ONLY = ("xyz", "pts", "txt", "csv", "pcd", "npy")  # formats that hold points and never faces
 POINT_FORMATS = (*POINTS_ONLY, "off", "obj", "ply")
 
 
@@ -110,8 +110,9 @@ def load_point_cloud(
     """Read a point cloud: ``.xyz`` / ``.pts`` / ``.txt`` / ``.csv`` (one point per line, separated by spaces,
     commas or semicolons: x y z first, or the columns a first line names, such as ``x,y,z,nx,ny,nz`` or
     CloudCompare's ``//X Y Z``; a PTS file's point-count lines are checked and skipped; further columns are
-    ignored but normals, below), ``.npy`` ((n, 3) or wider), or the vertices of an ``.off`` / ``.obj`` /
-    ``.ply`` (faces, if any, are ignored); ``.gz`` except for ``.npy``.
+    ignored but normals, below), PCL's ``.pcd`` (ascii, binary, binary_compressed), ``.npy`` ((n, 3) or
+    wider), or the vertices of an ``.off`` / ``.obj`` / ``.ply`` (faces, if any, are ignored); ``.gz`` except
+    for ``.npy``.
 
     Points keep their file order; ``neighbors``, ``separate_sheets`` and ``off_sheet`` as in
     :class:`~hamsa.pointcloud.PointCloud`. The normals the file holds (:func:`read_vertex_normals`) are the
@@ -149,8 +150,8 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
     fmt = point_format(path)
     if fmt is None:
         raise MeshError(
-            f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .csv .npy .off .obj .ply (optionally "
-            ".gz)"
+            f"cannot tell the point-cloud format of '{path}': use .xyz .pts .txt .csv .pcd .npy .off .obj .ply "
+            "(optionally .gz)"
         )
     kind, gzipped = fmt
     if kind in ("off", "obj", "ply"):
@@ -161,8 +162,10 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
             if points.shape[1] < 3:
                 raise MeshError(f"the array has shape {points.shape}, expected (n, 3) points")
             return np.asarray(points[:, :3], dtype=np.float64), None
-        text = read_bytes(path, decompress="gzip" if gzipped else None).decode("utf-8-sig")
-        return _point_table(text, normals, counted=kind == "pts")
+        data = read_bytes(path, decompress="gzip" if gzipped else None)
+        if kind == "pcd":
+            return _read_pcd(data, normals)
+        return _point_table(data.decode("utf-8-sig"), normals, counted=kind == "pts")
     except FileAccessError as exc:
         raise MeshError(str(exc)) from None
     except (ValueError, UnicodeDecodeError) as exc:
@@ -220,6 +223,95 @@ def _counted_blocks(lines: list[str]) -> list[str]:
         points += block
         at += 1 + int(count[0])
     return points
+
+
+_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8",
+              ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}  # fmt: skip
+
+
+def _read_pcd(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """(points, normals or None) of a PCL point cloud file (``.pcd`` v0.7: ``DATA ascii``, ``binary`` or
+    ``binary_compressed``): x y z, and ``normal_x normal_y normal_z`` when asked and present. An organized
+    cloud's invalid points are NaN, as PCL writes them."""
+    header, at = {}, 0
+    while "DATA" not in header:
+        end = data.find(b"\n", at)
+        if end < 0:
+            raise MeshError("no 'DATA' line in the PCD header")
+        words = data[at:end].decode("ascii").split()
+        at = end + 1
+        if words and not words[0].startswith("#"):
+            header[words[0].upper()] = words[1:]
+    fields = header.get("FIELDS", [])
+    missing = [c for c in "xyz" if c not in fields]
+    if missing:
+        raise MeshError(f"the PCD fields {fields} lack {missing}")
+    count = int(header.get("POINTS", [0])[0])
+    sizes = [int(x) for x in header.get("SIZE", [])]
+    kinds = header.get("TYPE", [])
+    counts = [int(x) for x in header.get("COUNT", ["1"] * len(fields))]
+    if not len(sizes) == len(kinds) == len(counts) == len(fields):
+        raise MeshError("the PCD header's FIELDS, SIZE, TYPE and COUNT differ in length")
+    if any((k, z) not in _PCD_TYPES for k, z in zip(kinds, sizes)):
+        raise MeshError(f"unknown PCD types {list(zip(kinds, sizes))}")
+    record = np.dtype([(f, "<" + _PCD_TYPES[k, z], (c,)) for f, k, z, c in zip(fields, kinds, sizes, counts)])
+    storage = header["DATA"][0] if header["DATA"] else ""
+    if storage == "ascii":
+        table = _fixed_width(_data_lines(data[at:].decode("ascii")), sum(counts), "point")
+        columns = dict(zip(fields, np.split(table, np.cumsum(counts)[:-1], axis=1)))
+    elif storage == "binary":
+        if len(data) - at < record.itemsize * count:
+            raise MeshError("the PCD file is shorter than its POINTS promise")
+        table = np.frombuffer(data, dtype=record, count=count, offset=at)
+        columns = {f: table[f] for f in fields}
+    elif storage == "binary_compressed":
+        if len(data) - at < 8:
+            raise MeshError("the PCD file is shorter than its POINTS promise")
+        packed, size = struct.unpack_from("<II", data, at)
+        body = _lzf_decompress(data[at + 8 : at + 8 + packed], size)
+        if len(body) < record.itemsize * count:
+            raise MeshError("the PCD file is shorter than its POINTS promise")
+        columns, offset = {}, 0  # field after field, each for all points
+        for f, k, z, c in zip(fields, kinds, sizes, counts):
+            columns[f] = np.frombuffer(body, "<" + _PCD_TYPES[k, z], count * c, offset).reshape(count, c)
+            offset += count * c * z
+    else:
+        raise MeshError(f"unknown PCD storage 'DATA {storage}' (ascii, binary, binary_compressed)")
+    points = np.hstack([columns[c][:, :1] for c in "xyz"]).astype(np.float64)
+    given = ("normal_x", "normal_y", "normal_z")
+    if not (normals and all(c in columns for c in given)):
+        return points, None
+    return points, np.hstack([columns[c][:, :1] for c in given]).astype(np.float64)
+
+
+def _lzf_decompress(packed: bytes, size: int) -> bytes:
+    """LZF (liblzf, as PCL's binary_compressed uses it) expanded to ``size`` bytes: a control byte below 32
+    copies that many + 1 literal bytes; otherwise its top 3 bits (7: one more length byte) + 2 bytes are
+    copied from ``((control & 31) << 8) + next byte + 1`` bytes back."""
+    out, at = bytearray(), 0
+    while at < len(packed):
+        control = packed[at]
+        at += 1
+        if control < 32:
+            out += packed[at : at + control + 1]
+            at += control + 1
+            continue
+        length = control >> 5
+        if length == 7:
+            length += packed[at]
+            at += 1
+        start = len(out) - ((control & 31) << 8) - packed[at] - 1
+        at += 1
+        if start < 0:
+            raise MeshError("the PCD's compressed data refers back before its start")
+        if start + length + 2 <= len(out):
+            out += out[start : start + length + 2]
+        else:  # the copy overlaps what it writes (a repeated pattern): byte by byte
+            for i in range(length + 2):
+                out.append(out[start + i])
+    if len(out) != size:
+        raise MeshError(f"the PCD's compressed data expands to {len(out)} bytes, its header says {size}")
+    return bytes(out)
 
 
 def _unit_rows(columns: np.ndarray) -> np.ndarray | None:
@@ -293,7 +385,8 @@ def read_vertex_normals(path: str | os.PathLike) -> np.ndarray | None:
 
     Read from a PLY vertex element's ``nx ny nz`` (or ``normal_x normal_y normal_z``) properties, an ``NOFF`` /
     ``CNOFF`` file's vertex lines, OBJ ``vn`` lines when there are as many as ``v`` lines (fewer or more are
-    per-corner normals that the faces index: None), or the fourth to sixth columns of an ``.xyz`` / ``.pts``
+    per-corner normals that the faces index: None), a PCD file's ``normal_x normal_y normal_z`` fields, the
+    columns a text point file's first line names so, or the fourth to sixth columns of an ``.xyz`` / ``.pts``
     / ``.txt`` file when they are unit vectors on every line (``x y z nx ny nz``; other columns, such as
     ``x y z r g b``, are not normals). Rows of zeros or NaN (points without a normal) are returned as they
     are, for the cloud to estimate there. ``.npy`` and STL files hold none. ``.gz`` too. Raises MeshError naming
