@@ -386,11 +386,12 @@ def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return edges, counts
 
 
-def check_coordinates(points: np.ndarray, what: str = "vertices") -> None:
-    """Raise MeshError if any of the (n, 3) ``points`` is NaN / Inf or too large for the geometry in float64."""
+def check_coordinates(points: np.ndarray, what: str = "vertices", remedy: str = "") -> None:
+    """Raise MeshError if any of the (n, 3) ``points`` is NaN / Inf (the message ends with ``remedy``, what
+    removes them) or too large for the geometry in float64."""
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if len(bad):
-        raise MeshError(f"{len(bad)} {what} have non-finite coordinates (NaN or Inf): {format_ids(bad)}")
+        raise MeshError(f"{len(bad)} {what} have non-finite coordinates (NaN or Inf): {format_ids(bad)}{remedy}")
     big = np.abs(points).max() if len(points) else 0.0
     if big > _LARGEST_COORDINATE:
         raise MeshError(

@@ -116,7 +116,7 @@ class PointCloud:
         normals=None,
     ):
         points = as_coordinates(points, "points")
-        check_coordinates(points, "points")
+        check_coordinates(points, "points", "; repair_point_cloud (--repair on the command line) drops them")
         self._given_normals = None if normals is None else _unit_normals(normals, len(points))
         missing = np.flatnonzero(np.isnan(self._given_normals[:, 0])) if normals is not None else []
         if len(missing):
