@@ -363,6 +363,9 @@ def test_text_point_files_as_scanners_and_cloudcompare_write_them(tmp_path):
             np.testing.assert_array_equal(given, normals)
         else:
             assert given is None, name
+    (tmp_path / "comma.csv").write_text("1,5;2,25;0,75\n" * 20)  # decimal commas: refused, not split
+    with pytest.raises(MeshError, match="could not convert string to float: '1,5'"):
+        hamsa.io.read_point_array(tmp_path / "comma.csv")
     (tmp_path / "short.pts").write_text("\n".join([str(len(rows) + 5), *rows]))
     with pytest.raises(MeshError, match="block at data line 1 promises 167 points and has fewer"):
         hamsa.io.read_point_array(tmp_path / "short.pts")

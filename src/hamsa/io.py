@@ -30,6 +30,7 @@ from hamsa.pointcloud import DEFAULT_NEIGHBORS, PointCloud
 FORMATS = ("off", "obj", "ply", "stl")
 POINTS_ONLY = ("xyz", "pts", "txt", "csv", "pcd", "npy")  # formats that hold points and never faces
 POINT_FORMATS = (*POINTS_ONLY, "off", "obj", "ply")
+_NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))  # PLY properties, text columns, PCD fields
 
 
 def _suffix(path: str | os.PathLike) -> tuple[str, bool]:
@@ -172,16 +173,16 @@ def _read_point_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray
         raise MeshError(f"'{path}' is not a valid {kind.upper()} point file: {exc}") from None
 
 
-_NAMED_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
-
-
 def _point_table(text: str, normals: bool, counted: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """(points, normals or None) of a text point file: one point per line, numbers separated by spaces, commas
     or semicolons. A first line that is not numbers names the columns (``x y z nx ny nz``, ``//X,Y,Z``, any
     case): x y z and the normals are read from the columns so named; otherwise x y z are the first three
     columns and the normals columns 4-6 when they are unit vectors (:func:`_unit_rows`). ``counted`` (PTS):
     a line holding one integer gives the number of points of the block that follows."""
-    lines = [line.replace(",", " ").replace(";", " ") for line in _data_lines(text)]
+    lines = _data_lines(text)
+    # ';' separates where commas are decimal marks ("1,5;2,25;0,75"): then commas are left to fail as numbers
+    separator = ";" if lines and ";" in lines[0] else ","
+    lines = [line.replace(separator, " ") for line in lines]
     names = None
     if lines and not _numbers(lines[0].split()):
         names = [name.lower() for name in lines.pop(0).lstrip("/").split()]
@@ -192,7 +193,7 @@ def _point_table(text: str, normals: bool, counted: bool) -> tuple[np.ndarray, n
     if names is None or not {"x", "y", "z"} <= set(names):
         table = _fixed_width(lines, 3, "point", spare=3 if normals else 0)
         return table[:, :3], _unit_rows(table[:, 3:])
-    given = next((c for c in _NAMED_NORMALS if set(c) <= set(names)), None) if normals else None
+    given = next((c for c in _NORMAL_NAMES if set(c) <= set(names)), None) if normals else None
     columns = [names.index(c) for c in ("x", "y", "z", *(given or ()))]
     table = _fixed_width(lines, max(columns) + 1, "point")[:, columns]
     return table[:, :3], table[:, 3:] if given else None
@@ -278,8 +279,8 @@ def _read_pcd(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray | None
     else:
         raise MeshError(f"unknown PCD storage 'DATA {storage}' (ascii, binary, binary_compressed)")
     points = np.hstack([columns[c][:, :1] for c in "xyz"]).astype(np.float64)
-    given = ("normal_x", "normal_y", "normal_z")
-    if not (normals and all(c in columns for c in given)):
+    given = next((c for c in _NORMAL_NAMES if all(name in columns for name in c)), None) if normals else None
+    if given is None:
         return points, None
     return points, np.hstack([columns[c][:, :1] for c in given]).astype(np.float64)
 
@@ -668,16 +669,13 @@ _PLY_TYPES = {
 }
 
 
-_PLY_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
-
-
 def _read_ply(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     table, faces = _read_ply_tables(data)
     _require_properties(table, "xyz")
     vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
     if faces is None:  # a point cloud
         faces = np.zeros((0, 3), dtype=np.int64)
-    names = next((names for names in _PLY_NORMALS if all(name in table for name in names)), None)
+    names = next((names for names in _NORMAL_NAMES if all(name in table for name in names)), None)
     if not normals or names is None:
         return vertices, faces, None
     return vertices, faces, np.stack([table[name].astype(np.float64) for name in names], axis=1)
