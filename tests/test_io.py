@@ -331,6 +331,43 @@ def test_text_files_with_a_byte_order_mark_read_as_without(tmp_path, mesh):
     assert read_text(tmp_path / "bom_p.xyz") == read_text(tmp_path / "p.xyz")
 
 
+def test_a_mesh_files_normals_are_read_only_when_asked(tmp_path, mesh):
+    """read_vertex_normals gives a mesh file's per-vertex normals (OBJ vn, NOFF, PLY nx ny nz); loading the mesh
+    does not parse them, so a normal line the mesh does not need (two numbers) does not refuse the mesh."""
+    normals = mesh.vertex_normals
+    hamsa.save_mesh(mesh, tmp_path / "m.obj")
+    vn = "".join(f"vn {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in normals)
+    (tmp_path / "n.obj").write_text((tmp_path / "m.obj").read_text() + vn)
+    (tmp_path / "bad.obj").write_text((tmp_path / "m.obj").read_text() + vn.rsplit(" ", 1)[0] + "\n")  # last: 2
+    off_rows = "".join(" ".join(f"{x:.17g}" for x in row) + "\n" for row in np.hstack([mesh.vertices, normals]))
+    faces = "".join(f"3 {a} {b} {c}\n" for a, b, c in mesh.faces)
+    (tmp_path / "n.off").write_text(f"NOFF\n{mesh.n_vertices} {mesh.n_faces} 0\n" + off_rows + faces)
+    for name in ("n.obj", "n.off"):
+        np.testing.assert_allclose(hamsa.io.read_vertex_normals(tmp_path / name), normals, atol=1e-15, err_msg=name)
+        vertices, read_faces, given = hamsa.io.read_shape_arrays(tmp_path / name)
+        assert given is None and np.array_equal(read_faces, mesh.faces), name
+    np.testing.assert_array_equal(hamsa.io.load_shape(tmp_path / "bad.obj").faces, mesh.faces)
+    with pytest.raises(MeshError, match="normal .* has 2 values"):
+        hamsa.io.read_vertex_normals(tmp_path / "bad.obj")
+
+
+def test_obj_negative_indices_count_back_from_their_face_line(tmp_path, mesh):
+    """Objects written one after another with relative (negative) indices: each face refers to the vertices
+    defined before it (the reader counted back from the end of the file: every face on the last object)."""
+    n = mesh.n_vertices
+    blocks = []
+    for shift in (0.0, 5.0):
+        blocks += [f"o piece{shift:g}"] + [f"v {x:.17g} {y:.17g} {z + shift:.17g}" for x, y, z in mesh.vertices]
+        blocks += [f"f {a - n} {b - n} {c - n}" for a, b, c in mesh.faces]
+    (tmp_path / "relative.obj").write_text("\n".join(blocks) + "\n")
+    read = hamsa.load_mesh(tmp_path / "relative.obj", manifold=False)
+    np.testing.assert_array_equal(read.faces, np.vstack([mesh.faces, mesh.faces + n]))
+    assert read.vertex_components[0] == 2
+    (tmp_path / "before.obj").write_text("v 0 0 0\nv 1 0 0\nf -3 -2 -1\nv 0 1 0\n")
+    with pytest.raises(MeshError, match="face 0 has a negative index reaching back before the first vertex"):
+        hamsa.load_mesh(tmp_path / "before.obj")
+
+
 def test_obj_lines_separated_by_tabs(tmp_path, mesh):
     """'v\t1\t2\t3' is a vertex line as 'v 1 2 3' is (the reader looked for 'v ' and skipped it)."""
     hamsa.save_mesh(mesh, tmp_path / "m.obj")

@@ -89,14 +89,28 @@ def read_shape_arrays(
     points-only format, or an OFF / OBJ / PLY / STL without faces), before any validation: what
     :func:`load_shape` builds its shape from, from one parse of the file.
 
-    ``normals`` is the (n, 3) per-vertex normals the file holds as :func:`read_vertex_normals` reads them, or
-    None when it holds none or ``normals=False``. Raises MeshError naming the file if it cannot be read or
-    parsed."""
+    ``normals`` is the (n, 3) per-point normals a point file holds as :func:`read_vertex_normals` reads them, or
+    None when it holds none, when ``normals=False``, or when the file has faces (a mesh's normals are not
+    parsed here: :func:`read_vertex_normals` reads them). Raises MeshError naming the file if it cannot be read
+    or parsed."""
+    return _read_shape(path, "points" if normals else False)
+
+
+def _read_shape(
+    path: str | os.PathLike, normals: bool | str
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """:func:`read_shape_arrays` with ``normals`` as the format readers take it (:func:`_normals_wanted`)."""
     if _suffix(path)[0] in POINTS_ONLY:
-        points, file_normals = _read_point_file(path, normals)
+        points, file_normals = _read_point_file(path, bool(normals))
         return points, None, file_normals
     vertices, faces, file_normals = _read_mesh_file(path, normals)
     return vertices, faces if len(faces) else None, file_normals
+
+
+def _normals_wanted(normals: bool | str, has_faces: bool) -> bool:
+    """Whether a format reader parses the normals a file holds: ``normals`` is True (always), False (never) or
+    ``"points"`` (only in a file without faces)."""
+    return normals is True or (normals == "points" and not has_faces)
 
 
 def load_point_cloud(
@@ -394,7 +408,7 @@ def read_vertex_normals(path: str | os.PathLike) -> np.ndarray | None:
     the file if it cannot be read or parsed; :func:`read_shape_arrays` gives the vertices and faces of the
     same parse.
     """
-    return read_shape_arrays(path)[2]
+    return _read_shape(path, True)[2]
 
 
 def read_vertex_colors(path: str | os.PathLike) -> np.ndarray:
@@ -460,9 +474,9 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return _read_mesh_file(path, normals=False)[:2]
 
 
-def _read_mesh_file(path: str | os.PathLike, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_mesh_file(path: str | os.PathLike, normals: bool | str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(vertices, faces, the per-vertex normals the file holds or None) of an OFF / OBJ / PLY / STL file, from
-    one parse; normals only when asked."""
+    one parse; normals only when asked (:func:`_normals_wanted`)."""
     fmt, gzipped = mesh_format(path)
     try:
         data = read_bytes(path, decompress="gzip" if gzipped else None)
@@ -562,9 +576,9 @@ def _integer_faces(rows: np.ndarray, what: str) -> np.ndarray:
     return rows.astype(np.int64)
 
 
-def _read_off(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_off(data: bytes, normals: bool | str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     variant, vertex_lines, face_lines = _off_parts(data)
-    with_normals = normals and variant.endswith("NOFF")  # x y z nx ny nz [colour]
+    with_normals = _normals_wanted(normals, bool(face_lines)) and variant.endswith("NOFF")  # x y z nx ny nz ...
     table = _fixed_width(vertex_lines, 6 if with_normals else 3, "vertex")
     vertices = table[:, :3]
     counts, corners = _off_polygons(face_lines)
@@ -612,35 +626,41 @@ def _off_polygons(face_lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
     return counts, _integer_faces(rows, "face").ravel()
 
 
-def _read_obj(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_obj(data: bytes, normals: bool | str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     vertex_lines, face_lines, normal_lines = _obj_lines(data)
     vertices = _fixed_width(vertex_lines, 3, "vertex")
     n = len(vertices)
-    flat = [int(token.split("/", 1)[0]) for f in face_lines for token in f]
+    flat = [int(token.split("/", 1)[0]) for _, f in face_lines for token in f]
     if flat and max(abs(min(flat)), abs(max(flat))) >= 2**53:
         raise MeshError(f"face index {max(flat, key=abs)} is out of range")
     corners = np.asarray(flat, dtype=np.int64)
-    # OBJ indices are 1-based; negative indices count back from the current end of the vertex list
-    # (here: the whole list, which is exact for files that define all vertices before the faces).
-    corners = np.where(corners > 0, corners - 1, corners + n)
-    if np.any(np.asarray(flat) == 0):
+    if np.any(corners == 0):
         raise MeshError("OBJ face index 0 is invalid (indices are 1-based)")
-    faces = triangulate_polygons(vertices, corners, [len(f) for f in face_lines])
+    counts = [len(f) for _, f in face_lines]
+    # 1-based; a negative index counts back from the vertices defined before its face line
+    defined = np.repeat([before for before, _ in face_lines], counts).astype(np.int64)
+    corners = np.where(corners > 0, corners - 1, corners + defined)
+    if np.any(corners < 0):
+        raise MeshError(
+            f"face {np.repeat(np.arange(len(counts)), counts)[np.argmax(corners < 0)]} has a negative "
+            "index reaching back before the first vertex"
+        )
+    faces = triangulate_polygons(vertices, corners, counts)
     # as many 'vn' as 'v' lines: one normal per vertex; otherwise per-corner normals that the faces index
-    per_vertex = normals and len(normal_lines) == n
+    per_vertex = _normals_wanted(normals, bool(face_lines)) and len(normal_lines) == n
     return vertices, faces, _fixed_width(normal_lines, 3, "normal") if per_vertex else None
 
 
-def _obj_lines(data: bytes) -> tuple[list[str], list[list[str]], list[str]]:
-    """(the text after 'v ' of each vertex line, the tokens after 'f ' of each face line, the text after 'vn '
-    of each normal line) of an OBJ file."""
+def _obj_lines(data: bytes) -> tuple[list[str], list[tuple[int, list[str]]], list[str]]:
+    """(the text after 'v ' of each vertex line, (the number of vertex lines before it, the tokens after 'f ') of
+    each face line, the text after 'vn ' of each normal line) of an OBJ file."""
     vertex_lines, face_lines, normal_lines = [], [], []
     for raw in data.decode("utf-8-sig").splitlines():
         keyword, *rest = raw.split("#", 1)[0].split(None, 1) or [""]  # 'v 1 2 3' or 'v\t1\t2\t3'
         if keyword == "v":
             vertex_lines.append(rest[0] if rest else "")
         elif keyword == "f":
-            face_lines.append(rest[0].split() if rest else [])
+            face_lines.append((len(vertex_lines), rest[0].split() if rest else []))
         elif keyword == "vn":
             normal_lines.append(rest[0] if rest else "")
     if not vertex_lines:
@@ -669,10 +689,11 @@ _PLY_TYPES = {
 }
 
 
-def _read_ply(data: bytes, normals: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_ply(data: bytes, normals: bool | str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     table, faces = _read_ply_tables(data)
     _require_properties(table, "xyz")
     vertices = np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+    normals = _normals_wanted(normals, faces is not None)
     if faces is None:  # a point cloud
         faces = np.zeros((0, 3), dtype=np.int64)
     names = next((names for names in _NORMAL_NAMES if all(name in table for name in names)), None)
