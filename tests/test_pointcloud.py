@@ -1,5 +1,7 @@
 """Point clouds: the Sharp-Crane Laplacian against analytic spectra and the mesh operators, geodesics, I/O, errors."""
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -503,7 +505,7 @@ def _with_strays(mesh, seed=0):
 
 
 def test_stray_points_are_found_and_each_adds_a_spurious_low_eigenpair():
-    from hamsa.errors import InputWarning
+    from hamsa.eigen import unresolved_eigenpairs
     from hamsa.pointcloud import stray_points
 
     mesh = hamsa.shapes.humanoid().scaled_to_unit_area()
@@ -512,10 +514,47 @@ def test_stray_points_are_found_and_each_adds_a_spurious_low_eigenpair():
     with pytest.warns(InputWarning, match="8 stray points"):
         cloud = hamsa.PointCloud(points)
     np.testing.assert_array_equal(cloud.stray_points, appended)
-    values = hamsa.eigenbasis(cloud, 20).values
+    with pytest.warns(InputWarning, match="each live on fewer than 50 points"):
+        basis = hamsa.eigenbasis(cloud, 20)
+    np.testing.assert_array_equal(unresolved_eigenpairs(basis)[1], appended)  # the modes they make name them
+    values = basis.values
     clean = hamsa.eigenbasis(hamsa.PointCloud(mesh.vertices), 20).values
     # eight spurious pairs below the clean cloud's 20th eigenvalue: the spectrum shifts down by about eight places
     assert np.sum(values < clean[-1]) >= 19 and values[8] < 0.9 * clean[8], (values, clean)
+
+
+def test_modes_that_a_few_points_carry_are_named_and_go_with_them():
+    """Five points 12 local spacings off a sphere cloud (nearer than the stray rule's 15) each hang on weak links
+    and make low eigenpairs that live on one or two of them: eigenbasis warns, and unresolved_eigenpairs names
+    those five points and no other. Without them nothing is flagged and the spectrum is the sphere's."""
+    from hamsa.eigen import unresolved_eigenpairs
+
+    points = hamsa.shapes.icosphere(4).vertices
+    spacing = np.median(cKDTree(points).query(points, k=2)[0][:, 1])
+    off = np.random.default_rng(0).choice(len(points), 5, replace=False)
+    cloud = hamsa.PointCloud(np.vstack([points, points[off] * (1 + 12 * spacing)]))
+    assert len(cloud.stray_points) == 0
+    with pytest.warns(InputWarning, match=r"eigenpairs \(4, 5, .*each live on fewer than 50 points"):
+        basis = hamsa.eigenbasis(cloud, 20)
+    modes, named = unresolved_eigenpairs(basis)
+    np.testing.assert_array_equal(named, len(points) + np.arange(5))
+    assert len(modes) >= 5 and basis.participation[modes].max() < 3, basis.participation[modes]
+    kept = cloud.subset(np.arange(len(points)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)
+        clean = hamsa.eigenbasis(kept, 16)
+    assert len(unresolved_eigenpairs(clean)[0]) == 0
+    np.testing.assert_allclose(clean.values[1:], SPHERE[1:], rtol=0.02)
+
+
+def test_participation_counts_the_vertices_an_eigenvector_lives_on():
+    """1 / sum (a_i psi_i^2)^2: (sum a)^2 / sum a^2 for the constant (n on equal masses), 1 for a spike."""
+    masses = np.random.default_rng(2).uniform(0.5, 2.0, 300)
+    constant = np.full(300, 1 / np.sqrt(masses.sum()))
+    spike = np.zeros(300)
+    spike[7] = 1 / np.sqrt(masses[7])
+    basis = hamsa.Eigenbasis.from_arrays([0.0, 1.0], np.stack([constant, spike], axis=1), masses, check=False)
+    np.testing.assert_allclose(basis.participation, [masses.sum() ** 2 / (masses**2).sum(), 1.0], rtol=1e-12)
 
 
 def test_clean_clouds_have_no_stray_points_whatever_their_density():

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -45,9 +46,10 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from hamsa.chebyshev import residual_floor
-from hamsa.errors import ConvergenceError, HamsaError, ResourceError, SolverError
+from hamsa.errors import ConvergenceError, HamsaError, InputWarning, ResourceError, SolverError
 from hamsa.factorization import CholeskySolver
 from hamsa.files import atomic_write, load_npz
+from hamsa.mesh import format_ids
 from hamsa.operators import (
     LAPLACIANS,
     MASS_KINDS,
@@ -57,7 +59,7 @@ from hamsa.operators import (
     hamiltonian,
     laplacian_operators,
 )
-from hamsa.pointcloud import as_shape
+from hamsa.pointcloud import PointCloud, as_shape
 from hamsa.resources import require_memory
 
 METHODS = ("auto", "krylov", "dense", "chebyshev")
@@ -139,6 +141,14 @@ class Eigenbasis:
         if c.ndim not in (1, 2) or c.shape[0] != self.k:
             raise HamsaError(f"coefficients have shape {c.shape}, expected ({self.k},) or ({self.k}, d)")
         return self.vectors @ c
+
+    @property
+    def participation(self) -> np.ndarray:
+        """(k,) the participation number of each eigenvector, ``1 / sum_i w_i^2`` with ``w_i = a_i psi_i^2`` its
+        share of the mass at vertex i (a_i the lumped mass): about how many vertices it lives on (n for a
+        constant on a uniform sampling, 1 for a spike on one vertex)."""
+        blocks = (_mass_shares(self, np.arange(j, min(j + 16, self.k))) for j in range(0, self.k, 16))
+        return np.concatenate([1.0 / np.einsum("nk,nk->k", shares, shares) for shares in blocks])
 
     def truncate(self, k: int) -> Eigenbasis:
         """The first k eigenpairs."""
@@ -428,7 +438,56 @@ def eigenbasis(
     if restricted:
         vectors = np.zeros((n, free_vectors.shape[1]))
         vectors[free] = free_vectors
-    return Eigenbasis(values, vectors, A, potential, mass if laplacian == "cotan" else laplacian, info)
+    basis = Eigenbasis(values, vectors, A, potential, mass if laplacian == "cotan" else laplacian, info)
+    if isinstance(shape, PointCloud):
+        _warn_unresolved(basis)
+    return basis
+
+
+def _mass_shares(basis: Eigenbasis, columns: np.ndarray) -> np.ndarray:
+    """(n, len(columns)): each listed eigenvector's share of its mass at each vertex, ``a_i psi_i^2`` with a_i the
+    lumped mass (each column sums to 1)."""
+    shares = np.asarray(basis.mass.sum(axis=1)).ravel()[:, None] * basis.vectors[:, columns] ** 2
+    return shares / shares.sum(axis=0)
+
+
+UNRESOLVED_POINTS = 50  # an eigenvector of a point cloud living on fewer points than this is not resolved
+
+
+def unresolved_eigenpairs(basis: Eigenbasis) -> tuple[np.ndarray, np.ndarray]:
+    """``(modes, points)``: the eigenpairs whose :attr:`Eigenbasis.participation` is below
+    :data:`UNRESOLVED_POINTS` (and below n / 20, for small samplings), and the vertices holding at least 1% of
+    the mass of one of them, both ascending int64.
+
+    A surface's eigenfunction varies on the scale of its wavelength, so one that a handful of samples carry
+    is not the surface's. On a point cloud such a mode is made by the operator where a few points hang on
+    weak links to the rest: points off the surface, or a patch of normals with the wrong sign that cuts its
+    points off their sheet; or by a potential well narrower than the sampling. :func:`eigenbasis` warns
+    when a point cloud's basis has one."""
+    participation = basis.participation
+    modes = np.flatnonzero(participation < min(UNRESOLVED_POINTS, basis.n / 20))
+    points = np.flatnonzero((_mass_shares(basis, modes) >= 0.01).any(axis=1)) if len(modes) else modes
+    return modes.astype(np.int64), points.astype(np.int64)
+
+
+def _warn_unresolved(basis: Eigenbasis) -> None:
+    """An InputWarning naming the :func:`unresolved_eigenpairs` of a point cloud's basis, if any."""
+    modes, points = unresolved_eigenpairs(basis)
+    if not len(modes):
+        return
+    which = f"eigenpair {modes[0]} lives"
+    if len(modes) > 1:
+        which = f"{len(modes)} eigenpairs ({format_ids(modes)}) each live"
+    warnings.warn(
+        f"{which} on fewer than {UNRESOLVED_POINTS} points (participation number "
+        f"{format_ids(np.round(basis.participation[modes]))}; points {format_ids(points, 8)}): no mode of a surface "
+        "is that small, so the point-cloud operator made it where a few points hang on weak links (points off the "
+        "surface, a patch of normals with the wrong sign), or a potential well is narrower than the sampling. "
+        "Drop those points (hamsa.eigen.unresolved_eigenpairs gives them; PointCloud.subset), give the cloud its "
+        "normals, or use separate_sheets=False",
+        InputWarning,
+        stacklevel=3,
+    )
 
 
 def generalized_eigsh(
