@@ -523,16 +523,29 @@ def test_stray_points_are_found_and_each_adds_a_spurious_low_eigenpair():
     assert np.sum(values < clean[-1]) >= 19 and values[8] < 0.9 * clean[8], (values, clean)
 
 
-def test_modes_that_a_few_points_carry_are_named_and_go_with_them():
+def test_modes_that_a_few_points_carry_are_named_and_go_with_them(tmp_path, capsys):
     """Five points 12 local spacings off a sphere cloud (nearer than the stray rule's 15) each hang on weak links
     and make low eigenpairs that live on one or two of them: eigenbasis warns, and unresolved_eigenpairs names
-    those five points and no other. Without them nothing is flagged and the spectrum is the sphere's."""
+    those five points and no other. Without them nothing is flagged and the spectrum is the sphere's.
+    repair_point_cloud(modes=) and hamsa repair --modes drop exactly those five, and nothing of a clean cloud."""
+    from hamsa.cli import main
     from hamsa.eigen import unresolved_eigenpairs
+    from hamsa.repair import repair_point_cloud
 
     points = hamsa.shapes.icosphere(4).vertices
     spacing = np.median(cKDTree(points).query(points, k=2)[0][:, 1])
     off = np.random.default_rng(0).choice(len(points), 5, replace=False)
     cloud = hamsa.PointCloud(np.vstack([points, points[off] * (1 + 12 * spacing)]))
+    _, kept, report = repair_point_cloud(cloud.points, modes=20)
+    np.testing.assert_array_equal(kept, np.arange(len(points)))
+    assert report.unresolved_points == 5 and not repair_point_cloud(points, modes=20)[2].changed
+    np.savetxt(tmp_path / "near.xyz", cloud.points)
+    assert main(["repair", str(tmp_path / "near.xyz"), "-o", str(tmp_path / "fixed.xyz"), "--modes", "20"]) == 0
+    assert "5 unresolved points" in capsys.readouterr().out
+    np.testing.assert_array_equal(np.loadtxt(tmp_path / "fixed.xyz"), points)
+    hamsa.save_mesh(hamsa.shapes.icosphere(2), tmp_path / "m.off")
+    assert main(["repair", str(tmp_path / "m.off"), "-o", str(tmp_path / "r.off"), "--modes", "5"]) == 2
+    assert "--modes is for point clouds" in capsys.readouterr().err and not (tmp_path / "r.off").exists()
     assert len(cloud.stray_points) == 0
     with pytest.warns(InputWarning, match=r"eigenpairs \(4, 5, .*each live on fewer than 50 points"):
         basis = hamsa.eigenbasis(cloud, 20)

@@ -158,7 +158,7 @@ def _cloud_options(args) -> dict:
 def _repaired_cloud(points: np.ndarray, normals: np.ndarray | None, cloud: dict, keep: str = "all"):
     """:func:`hamsa.repair.repair_point_cloud` of a point file's points and normals (from
     :func:`hamsa.io.read_shape_arrays`, asked for when ``cloud["file_normals"]``) with the other
-    :func:`_cloud_options` of ``cloud``."""
+    :func:`_cloud_options` of ``cloud`` (and ``modes``, from ``hamsa repair``)."""
     from hamsa.repair import repair_point_cloud
 
     options = {name: value for name, value in cloud.items() if name != "file_normals"}
@@ -279,6 +279,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     repair.add_argument(
         "--ids", help="also write a .npy with the input vertex id of each output vertex (row i came from ids[i])"
+    )
+    repair.add_argument(
+        "--modes",
+        type=_positive_int,
+        metavar="K",
+        help="of a point cloud, also drop the points that eigenpairs among the K lowest live on alone (fewer than "
+        "50 points each: points just off the surface, patches of normals with the wrong sign; the warning of "
+        "basis names them); one to three eigensolves",
     )
     repair.add_argument(
         "-o",
@@ -1289,9 +1297,12 @@ def _repair(args) -> None:
                          ".csv .ply .npy (optionally .gz)")  # fmt: skip
     if ids is not None and output.name.lower().removesuffix(".gz").endswith(".stl"):
         raise HamsaError("STL does not keep the vertex order that --ids refers to: write .off, .obj or .ply")
-    repaired, report = _repaired_file(args.mesh, _cloud_options(args), keep="all" if args.all_pieces else "largest")
+    cloud = {**_cloud_options(args), "modes": args.modes or 0}
+    repaired, report = _repaired_file(args.mesh, cloud, keep="all" if args.all_pieces else "largest")
     _check_cloud_options(args, repaired.mesh)
     is_mesh = isinstance(repaired.mesh, TriMesh)
+    if is_mesh and args.modes:
+        raise HamsaError(f"--modes is for point clouds, and '{args.mesh}' is a mesh")
     if not (as_mesh if is_mesh else as_points):
         kind = "a mesh: write .off .obj .ply or .stl" if is_mesh else "points: write .xyz .txt .pts .csv .ply or .npy"
         raise HamsaError(f"'{args.mesh}' holds {kind}, not '{output}'")

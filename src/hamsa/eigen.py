@@ -483,8 +483,8 @@ def _warn_unresolved(basis: Eigenbasis) -> None:
         f"{format_ids(np.round(basis.participation[modes]))}; points {format_ids(points, 8)}): no mode of a surface "
         "is that small, so the point-cloud operator made it where a few points hang on weak links (points off the "
         "surface, a patch of normals with the wrong sign), or a potential well is narrower than the sampling. "
-        "Drop those points (hamsa.eigen.unresolved_eigenpairs gives them; PointCloud.subset), give the cloud its "
-        "normals, or use separate_sheets=False",
+        "Drop those points (hamsa repair --modes K; repair_point_cloud(..., modes=K)), give the cloud its normals, "
+        "or use separate_sheets=False",
         InputWarning,
         stacklevel=3,
     )

@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from hamsa.eigen import eigenbasis, unresolved_eigenpairs
 from hamsa.errors import InputWarning, MeshError
 from hamsa.mesh import TriMesh, as_coordinates, as_trimesh
 from hamsa.pointcloud import PointCloud
@@ -70,6 +71,7 @@ class PointCloudRepairReport(_Counts):
     repeated_points: int = 0
     stray_points: int = 0
     dropped_pieces: int = 0
+    unresolved_points: int = 0
 
 
 def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray, RepairReport]:
@@ -119,17 +121,22 @@ def repair_mesh(vertices, faces, keep: str = "all") -> tuple[TriMesh, np.ndarray
 
 
 def repair_point_cloud(
-    points, keep: str = "all", **cloud_options
+    points, keep: str = "all", modes: int = 0, **cloud_options
 ) -> tuple[PointCloud, np.ndarray, PointCloudRepairReport]:
     """Drop the points of a cloud that have no right place in it, in this order: points with a NaN or infinite
     coordinate, points that repeat an earlier point exactly (the first is kept), the stray points that
-    :func:`hamsa.pointcloud.stray_points` finds among the rest and, with ``keep="largest"``, every piece of the
-    cloud (:attr:`~hamsa.pointcloud.PointCloud.vertex_components`) but the one of largest mass.
+    :func:`hamsa.pointcloud.stray_points` finds among the rest, with ``keep="largest"`` every piece of the
+    cloud (:attr:`~hamsa.pointcloud.PointCloud.vertex_components`) but the one of largest mass, and with
+    ``modes`` the points that the unresolved eigenpairs among the ``modes`` lowest live on
+    (:func:`hamsa.eigen.unresolved_eigenpairs`: points nearer the surface than the stray rule looks, patches
+    of normals with the wrong sign), solved again until none is left (at most three solves).
 
     Parameters
     ----------
     points : (n, 3) array
     keep : "all" pieces, or "largest" (by the operator's mass; building the operators twice when it drops any)
+    modes : how many of the lowest eigenpairs (of the Laplacian) to check for unresolved ones; 0 (default): no
+        eigensolve
     **cloud_options : the keywords of :class:`~hamsa.pointcloud.PointCloud` (``neighbors``, ...); given
         ``normals`` (n, 3) are those of the input points, and the cloud keeps the rows of the points it keeps
 
@@ -142,6 +149,8 @@ def repair_point_cloud(
     """
     if keep not in ("all", "largest"):
         raise MeshError(f"keep must be 'all' or 'largest', got {keep!r}")
+    if not isinstance(modes, (int, np.integer)) or modes < 0:
+        raise MeshError(f"modes must be a non-negative integer, got {modes!r}")
     points = as_coordinates(points, "points")
     normals = cloud_options.pop("normals", None)
     if normals is not None and np.shape(normals) != points.shape:
@@ -169,7 +178,20 @@ def repair_point_cloud(
         largest = np.argmax(np.bincount(labels, weights=cloud.operators[1].diagonal()))
         kept = kept[labels == largest]
         cloud = cloud_of(kept)
+    counts["unresolved_points"] = 0
+    for _ in range(_UNRESOLVED_ROUNDS if modes else 0):
+        with warnings.catch_warnings():  # eigenbasis's warning names the points dropped here
+            warnings.simplefilter("ignore", InputWarning)
+            unresolved = unresolved_eigenpairs(eigenbasis(cloud, min(modes, cloud.n_vertices - 1)))[1]
+        if not len(unresolved):
+            break
+        counts["unresolved_points"] += len(unresolved)
+        kept = np.delete(kept, unresolved)
+        cloud = cloud_of(kept)
     return cloud, kept, PointCloudRepairReport(**counts)
+
+
+_UNRESOLVED_ROUNDS = 3  # eigensolves of repair_point_cloud(modes=)
 
 
 def orient_faces(mesh) -> TriMesh:
