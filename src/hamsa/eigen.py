@@ -464,15 +464,20 @@ def unresolved_eigenpairs(basis: Eigenbasis) -> tuple[np.ndarray, np.ndarray]:
     weak links to the rest: points off the surface, or a patch of normals with the wrong sign that cuts its
     points off their sheet; or by a potential well narrower than the sampling. :func:`eigenbasis` warns
     when a point cloud's basis has one."""
+    return _unresolved(basis)[:2]
+
+
+def _unresolved(basis: Eigenbasis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(modes, points, participation (k,)): :func:`unresolved_eigenpairs` and the participation it decided by."""
     participation = basis.participation
     modes = np.flatnonzero(participation < min(UNRESOLVED_POINTS, basis.n / 20))
     points = np.flatnonzero((_mass_shares(basis, modes) >= 0.01).any(axis=1)) if len(modes) else modes
-    return modes.astype(np.int64), points.astype(np.int64)
+    return modes.astype(np.int64), points.astype(np.int64), participation
 
 
 def _warn_unresolved(basis: Eigenbasis) -> None:
     """An InputWarning naming the :func:`unresolved_eigenpairs` of a point cloud's basis, if any."""
-    modes, points = unresolved_eigenpairs(basis)
+    modes, points, participation = _unresolved(basis)
     if not len(modes):
         return
     which = f"eigenpair {modes[0]} lives"
@@ -480,7 +485,7 @@ def _warn_unresolved(basis: Eigenbasis) -> None:
         which = f"{len(modes)} eigenpairs ({format_ids(modes)}) each live"
     warnings.warn(
         f"{which} on fewer than {UNRESOLVED_POINTS} points (participation number "
-        f"{format_ids(np.round(basis.participation[modes]))}; points {format_ids(points, 8)}): no mode of a surface "
+        f"{format_ids(np.round(participation[modes]))}; points {format_ids(points, 8)}): no mode of a surface "
         "is that small, so the point-cloud operator made it where a few points hang on weak links (points off the "
         "surface, a patch of normals with the wrong sign), or a potential well is narrower than the sampling. "
         "Drop those points (hamsa repair --modes K; repair_point_cloud(..., modes=K)), give the cloud its normals, "
